@@ -1,0 +1,41 @@
+"""lidarcal: extrinsic calibration between LiDARs.
+
+Transforms are 4x4 float64 matrices ``reference_from_target`` (``p_ref = R @ p_tgt + t``);
+point clouds are ``(N, 3)`` or ``(N, 4)`` arrays of float32 or float64.
+
+This release holds the numerical kernels the calibration methods build on:
+
+* :func:`kabsch` -- the rotation best aligning two sets of vectors;
+* :func:`so3_exp`, :func:`so3_log`, :func:`se3_exp`, :func:`se3_log` -- the Lie group maps;
+* :func:`refine_point_to_plane`, :func:`refine_point_to_line` -- Levenberg-Marquardt refinement
+  of a transform from point-to-plane or point-to-line residuals, returning a :class:`RefineResult`.
+
+Bad input raises ``ValueError`` naming the problem; a calibration that cannot be trusted raises
+:class:`CalibrationError`.
+"""
+
+from lidarcal._lidarcal import (
+    CalibrationError,
+    RefineResult,
+    __version__,
+    kabsch,
+    refine_point_to_line,
+    refine_point_to_plane,
+    se3_exp,
+    se3_log,
+    so3_exp,
+    so3_log,
+)
+
+__all__ = [
+    "CalibrationError",
+    "RefineResult",
+    "__version__",
+    "kabsch",
+    "refine_point_to_line",
+    "refine_point_to_plane",
+    "se3_exp",
+    "se3_log",
+    "so3_exp",
+    "so3_log",
+]

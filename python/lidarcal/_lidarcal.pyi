@@ -1,0 +1,76 @@
+"""Type stubs of the compiled extension module ``lidarcal._lidarcal``."""
+
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+ArrayLike = npt.ArrayLike
+F64Array = npt.NDArray[np.float64]
+Frame = Literal["target", "reference"]
+LossName = Literal["squared", "linear", "huber", "cauchy"]
+
+__version__: str
+
+class CalibrationError(RuntimeError):
+    """A calibration could not produce a trustworthy result; the message says why."""
+
+class RefineResult:
+    """The result of a refinement: the transform and the solver's report."""
+
+    @property
+    def transform(self) -> F64Array:
+        """(4, 4) ``reference_from_target``."""
+    @property
+    def initial_cost(self) -> float: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def evaluations(self) -> int: ...
+    @property
+    def termination(self) -> str: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def residual_count(self) -> int: ...
+    @property
+    def hessian(self) -> F64Array: ...
+    @property
+    def covariance(self) -> F64Array | None: ...
+
+def kabsch(a: ArrayLike, b: ArrayLike, weights: ArrayLike | None = None) -> F64Array:
+    """The rotation ``R`` minimising ``sum w_i |R b_i - a_i|^2``."""
+
+def so3_exp(phi: ArrayLike) -> F64Array: ...
+def so3_log(rotation: ArrayLike) -> F64Array: ...
+def se3_exp(xi: ArrayLike) -> F64Array: ...
+def se3_log(transform: ArrayLike) -> F64Array: ...
+def refine_point_to_plane(
+    planes: ArrayLike,
+    points: Sequence[ArrayLike],
+    initial_transform: ArrayLike | None = None,
+    *,
+    frames: Sequence[Frame] | None = None,
+    loss: LossName = "squared",
+    loss_scale: float = 0.1,
+    max_iterations: int = 100,
+) -> RefineResult: ...
+def refine_point_to_line(
+    lines: ArrayLike,
+    points: Sequence[ArrayLike],
+    initial_transform: ArrayLike | None = None,
+    *,
+    frames: Sequence[Frame] | None = None,
+    loss: LossName = "squared",
+    loss_scale: float = 0.1,
+    max_iterations: int = 100,
+) -> RefineResult: ...
+def point_to_plane_residuals(
+    points: ArrayLike, plane: ArrayLike, transform: ArrayLike, frame: Frame = "target"
+) -> tuple[F64Array, F64Array]: ...
+def point_to_line_residuals(
+    points: ArrayLike, line: ArrayLike, transform: ArrayLike, frame: Frame = "target"
+) -> tuple[F64Array, F64Array]: ...

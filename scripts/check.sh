@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# The whole test suite, from a fresh clone: sets up a virtualenv with the Python tools, builds the
+# wheel once (release), and runs every check. Usage: bash scripts/check.sh
+# Environment: VENV (default .venv) chooses the virtualenv; SKIP_SETUP=1 skips pip installs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+VENV=${VENV:-.venv}
+step() { printf '\n==> %s\n' "$*"; }
+
+step "python environment ($VENV)"
+if [ ! -x "$VENV/bin/python" ]; then
+    python3 -m venv "$VENV"
+fi
+PY="$VENV/bin/python"
+if [ "${SKIP_SETUP:-0}" != 1 ]; then
+    "$PY" -m pip install --quiet --upgrade pip
+    "$PY" -m pip install --quiet "maturin>=1.7,<2" "numpy>=1.22" "scipy>=1.9" "pytest>=7" "ruff>=0.6" "mypy>=1.10"
+fi
+
+step "cargo fmt --check"
+cargo fmt --all -- --check
+
+step "cargo clippy (all targets, all features)"
+PYO3_PYTHON="$PWD/$PY" cargo clippy --all-targets --all-features --quiet -- -D warnings
+
+step "cargo test"
+cargo test --quiet
+
+step "cargo check --no-default-features"
+cargo check --no-default-features --quiet
+if cargo tree --no-default-features -e normal --prefix none | grep -Eq '^(pyo3|numpy|rayon) '; then
+    echo "error: the no-default-features build pulls in pyo3, numpy or rayon" >&2
+    exit 1
+fi
+
+step "build and install the wheel (release)"
+rm -rf target/wheels
+"$VENV/bin/maturin" build --release --quiet --interpreter "$PY" --out target/wheels
+"$PY" -m pip install --quiet --force-reinstall --no-deps target/wheels/lidarcal-*.whl
+
+step "ruff"
+"$VENV/bin/ruff" check python tests/python benches
+"$VENV/bin/ruff" format --check python tests/python benches
+
+step "mypy"
+"$VENV/bin/mypy"
+
+step "pytest"
+# Run from tests/ so `import lidarcal` resolves to the installed wheel, not the source tree.
+(cd tests/python && "../../$PY" -m pytest -q -c ../../pyproject.toml --rootdir ../..)

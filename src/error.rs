@@ -1,0 +1,49 @@
+//! The crate's error type.
+//!
+//! Library code never panics on bad input: every fallible function returns [`Result`]. The variants
+//! separate "the caller passed something malformed" ([`Error::InvalidInput`]), "the input is well
+//! formed but does not determine an answer" ([`Error::Degenerate`]) and "a calibration pipeline could
+//! not find a trustworthy solution" ([`Error::Calibration`]). The Python layer maps the first two to
+//! `ValueError` and the last to `lidarcal.CalibrationError`.
+
+/// Errors returned by lidarcal.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Error {
+    /// Malformed input: wrong length, non-finite values, negative weights, bad parameters.
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// Well-formed input that does not determine the requested quantity
+    /// (e.g. parallel vectors given to Kabsch).
+    #[error("degenerate input: {0}")]
+    Degenerate(String),
+    /// A calibration could not produce a trustworthy result; the message says why.
+    #[error("calibration failed: {0}")]
+    Calibration(String),
+    /// A numerical routine produced non-finite values (a bug or an extreme input).
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+}
+
+/// Shorthand for `Result<T, lidarcal::Error>`.
+pub type Result<T> = std::result::Result<T, Error>;
+
+/// Returns `Err(InvalidInput)` naming `what` and the first offending index if any value is not finite.
+pub(crate) fn ensure_finite<'a, I>(what: &str, values: I) -> Result<()>
+where
+    I: IntoIterator<Item = &'a f64>,
+{
+    let mut count = 0usize;
+    let mut first = None;
+    for (i, v) in values.into_iter().enumerate() {
+        if !v.is_finite() {
+            count += 1;
+            first.get_or_insert(i);
+        }
+    }
+    match first {
+        None => Ok(()),
+        Some(i) => Err(Error::InvalidInput(format!(
+            "{what} contains {count} non-finite value(s) (NaN or inf), the first at flat index {i}"
+        ))),
+    }
+}

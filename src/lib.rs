@@ -1,0 +1,76 @@
+//! # lidarcal
+//!
+//! Extrinsic calibration between LiDARs: the rigid transform `reference_from_target` that maps a
+//! target sensor's points into a reference sensor's frame (`p_ref = R p_tgt + t`), found from what
+//! the sensors see, without an initial guess.
+//!
+//! This release provides the numerical foundation the calibration methods are built on:
+//!
+//! * [`geometry`]: SO(3)/SE(3) exponential and logarithm (accurate near 0 and pi), 4x4
+//!   conversions, [`Plane`] and [`Line`].
+//! * [`kabsch`](mod@kabsch): weighted Kabsch with the reflection fix and a documented degeneracy test.
+//! * [`lm`]: a Levenberg–Marquardt solver on SE(3) with a report (termination reason, `J^T J`).
+//! * [`residuals`]: point-to-plane and point-to-line problems with analytic Jacobians.
+//!
+//! ## Features
+//! * `parallel` (default): rayon in residual accumulation. Results are bit-identical with or
+//!   without it and for any thread count.
+//! * `io` (default): point-cloud file formats.
+//! * `python`: the PyO3 extension module; only maturin turns it on.
+//!
+//! With `default-features = false` the crate depends on nalgebra and thiserror only, never panics
+//! on bad input (every fallible function returns [`Result`]) and holds no global state.
+//!
+//! ## Example: recover a pose from three planes
+//! ```
+//! use lidarcal::geometry::{se3_exp, Plane};
+//! use lidarcal::lm::{solve, LmOptions, Loss};
+//! use lidarcal::residuals::{Frame, PlaneGroup, PointToPlane};
+//! use nalgebra::{Isometry3, Point3, Vector3, Vector6};
+//!
+//! let reference_from_target = se3_exp(&Vector6::new(0.4, -0.3, 0.2, 0.1, 0.05, -0.2));
+//! let walls = [(Vector3::x(), -4.0), (Vector3::y(), -3.0), (Vector3::z(), 1.8)];
+//! let mut groups = Vec::new();
+//! for (normal, offset) in walls {
+//!     let plane = Plane::new(normal, offset)?;
+//!     let (u, v) = lidarcal::geometry::orthonormal_basis(&plane.normal);
+//!     let origin = plane.project(&Point3::origin());
+//!     let points = (0..400)
+//!         .map(|i| {
+//!             let p_ref = origin + u * (i % 20) as f64 * 0.1 + v * (i / 20) as f64 * 0.1;
+//!             reference_from_target.inverse() * p_ref // as the target sensor sees it
+//!         })
+//!         .collect();
+//!     groups.push(PlaneGroup { plane, points, frame: Frame::Target });
+//! }
+//! let problem = PointToPlane::new(groups, Loss::Squared)?;
+//! let solution = solve(&problem, &Isometry3::identity(), &LmOptions::default())?;
+//! assert!(solution.report.converged());
+//! let error = solution.pose.inverse() * reference_from_target;
+//! assert!(error.translation.vector.norm() < 1e-9 && error.rotation.angle() < 1e-9);
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+#![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
+
+pub mod error;
+pub mod geometry;
+pub mod kabsch;
+pub mod lm;
+pub mod residuals;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{Error, Result};
+
+/// The README's Rust examples, compiled and run as doctests so they cannot rot.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
+pub use geometry::{Line, Plane};
+pub use kabsch::{kabsch, KabschSolution};
+pub use lm::{LmOptions, LmReport, LmSolution, Loss, Termination};

@@ -1,0 +1,64 @@
+//! The `lidarcal._lidarcal` extension module: a thin layer that checks arguments, converts arrays,
+//! releases the GIL around Rust work and maps errors to Python exceptions. Nothing numerical
+//! happens here.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use pyo3::create_exception;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+use crate::Error;
+
+mod arrays;
+mod kernels;
+
+create_exception!(
+    lidarcal,
+    CalibrationError,
+    PyRuntimeError,
+    "A calibration could not produce a trustworthy result; the message says why."
+);
+
+/// One place where core errors become Python exceptions: malformed or degenerate input is a
+/// `ValueError`, a failed calibration a `lidarcal.CalibrationError`.
+impl From<Error> for PyErr {
+    fn from(e: Error) -> PyErr {
+        match e {
+            Error::InvalidInput(m) | Error::Degenerate(m) => PyValueError::new_err(m),
+            Error::Calibration(m) => CalibrationError::new_err(m),
+            Error::Numerical(m) => CalibrationError::new_err(format!("numerical failure: {m}")),
+        }
+    }
+}
+
+/// Runs `f` with the GIL released, turning its `Err` into an exception and any panic (a bug) into a
+/// `RuntimeError` instead of unwinding into the interpreter.
+pub(crate) fn run<T, F>(py: Python<'_>, f: F) -> PyResult<T>
+where
+    T: Send,
+    F: FnOnce() -> crate::Result<T> + Send,
+{
+    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+        Ok(Ok(value)) => Ok(value),
+        Ok(Err(e)) => Err(e.into()),
+        Err(payload) => {
+            let msg = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PyRuntimeError::new_err(format!(
+                "internal error in lidarcal (a bug, please report it): {msg}"
+            )))
+        }
+    }
+}
+
+#[pymodule]
+fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("CalibrationError", m.py().get_type::<CalibrationError>())?;
+    kernels::register(m)?;
+    Ok(())
+}

@@ -1,0 +1,63 @@
+//! Scene generators shared by the integration tests and the criterion benches
+//! (the benches include this file with `#[path]`).
+#![allow(dead_code)]
+
+use lidarcal::geometry::{orthonormal_basis, se3_exp, Plane};
+use lidarcal::residuals::{Frame, PlaneGroup};
+use nalgebra::{Isometry3, Point3, Vector3, Vector6};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// A standard normal sample by Box–Muller (keeps the dependency list short).
+pub fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random_range(f64::EPSILON..1.0);
+    let u2: f64 = rng.random_range(0.0..1.0);
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// A wall corner: three planes in the reference frame, `n . p + d = 0`.
+pub fn corner_planes() -> [Plane; 3] {
+    [
+        Plane::new(Vector3::new(-1.0, 0.15, 0.0), 5.0).unwrap(),
+        Plane::new(Vector3::new(0.1, -1.0, 0.05), 4.0).unwrap(),
+        Plane::new(Vector3::new(0.0, 0.05, 1.0), 1.8).unwrap(),
+    ]
+}
+
+/// The ground-truth `reference_from_target` used by the benches and tests.
+pub fn true_pose() -> Isometry3<f64> {
+    se3_exp(&Vector6::new(0.8, -0.4, 0.3, 0.05, -0.08, 0.6))
+}
+
+/// `n_per_plane` target-frame points on each corner plane (uniform in a 6 m square patch), with
+/// Gaussian noise of `sigma` metres along the normal.
+pub fn corner_groups(n_per_plane: usize, sigma: f64, seed: u64) -> Vec<PlaneGroup> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let target_from_reference = true_pose().inverse();
+    corner_planes()
+        .iter()
+        .map(|plane| {
+            let (u, v) = orthonormal_basis(&plane.normal);
+            let origin = plane.project(&Point3::origin());
+            let points = (0..n_per_plane)
+                .map(|_| {
+                    let a: f64 = rng.random_range(-3.0..3.0);
+                    let b: f64 = rng.random_range(-3.0..3.0);
+                    let noise = gaussian(&mut rng) * sigma;
+                    let p_ref = origin + u * a + v * b + plane.normal.into_inner() * noise;
+                    target_from_reference * p_ref
+                })
+                .collect();
+            PlaneGroup {
+                plane: *plane,
+                points,
+                frame: Frame::Target,
+            }
+        })
+        .collect()
+}
+
+/// An initial guess off the truth by about 5.7 degrees and 0.35 m.
+pub fn perturbed_start() -> Isometry3<f64> {
+    se3_exp(&Vector6::new(0.2, -0.25, 0.15, 0.06, 0.05, -0.06)) * true_pose()
+}

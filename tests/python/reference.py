@@ -1,0 +1,263 @@
+"""A plain NumPy reference of lidarcal's numerical kernels, for parity tests.
+
+Written independently of the Rust code and from the textbook formulas: Kabsch by SVD, the SO(3)
+logarithm by atan2 with a separate branch near pi, SE(3) exp/log by the closed-form left Jacobian,
+the point-to-plane and point-to-line residuals with their left-perturbation Jacobians, and a
+solve of the same alignment problems with SciPy's ``least_squares`` (finite-difference Jacobian,
+so it shares nothing with the analytic one).
+
+Conventions match lidarcal: ``T = reference_from_target``; twists are ``[rho, phi]``;
+perturbations act on the left, ``T <- exp(delta) @ T``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+
+def hat(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def vee(m: np.ndarray) -> np.ndarray:
+    return np.array([m[2, 1], m[0, 2], m[1, 0]])
+
+
+def so3_exp(phi: np.ndarray) -> np.ndarray:
+    theta = float(np.linalg.norm(phi))
+    k = hat(phi)
+    if theta < 1e-8:
+        return np.eye(3) + k + 0.5 * k @ k
+    return np.eye(3) + np.sin(theta) / theta * k + 2 * np.sin(theta / 2) ** 2 / theta**2 * k @ k
+
+
+def so3_log(r: np.ndarray) -> np.ndarray:
+    w = vee(r - r.T)  # = 2 sin(theta) axis
+    s = 0.5 * np.linalg.norm(w)
+    c = 0.5 * (np.trace(r) - 1.0)
+    theta = np.arctan2(s, c)
+    if theta < 1e-8:
+        return 0.5 * w
+    if theta < np.pi - 1e-4:
+        return theta / (2.0 * np.sin(theta)) * w
+    # Near pi: (R + R^T)/2 - c I = (1 - c) a a^T; take the best-conditioned column.
+    b = 0.5 * (r + r.T) - c * np.eye(3)
+    k = int(np.argmax(np.diag(b)))
+    a = b[:, k] / np.sqrt(b[k, k] * (1.0 - c))
+    if a @ w < 0:
+        a = -a
+    return theta * a / np.linalg.norm(a)
+
+
+def left_jacobian(phi: np.ndarray) -> np.ndarray:
+    theta = float(np.linalg.norm(phi))
+    k = hat(phi)
+    if theta < 1e-6:
+        return np.eye(3) + 0.5 * k + k @ k / 6.0
+    # 1 - cos(t) written as 2 sin^2(t/2): the direct form loses ~1e-16/t^2 to cancellation.
+    return (
+        np.eye(3)
+        + 2 * np.sin(theta / 2) ** 2 / theta**2 * k
+        + (theta - np.sin(theta)) / theta**3 * k @ k
+    )
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = so3_exp(xi[3:])
+    t[:3, 3] = left_jacobian(xi[3:]) @ xi[:3]
+    return t
+
+
+def se3_log(t: np.ndarray) -> np.ndarray:
+    phi = so3_log(t[:3, :3])
+    rho = np.linalg.solve(left_jacobian(phi), t[:3, 3])
+    return np.concatenate([rho, phi])
+
+
+def rotation_angle(r: np.ndarray) -> float:
+    """Angle of a rotation matrix, accurate near 0 (atan2 of the skew and symmetric parts)."""
+    return float(np.arctan2(0.5 * np.linalg.norm(vee(r - r.T)), 0.5 * (np.trace(r) - 1.0)))
+
+
+def kabsch(a: np.ndarray, b: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """R minimising sum w |R b - a|^2."""
+    w = np.ones(len(a)) if w is None else np.asarray(w, dtype=float)
+    h = (a * w[:, None]).T @ b
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(u @ vt))
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The basis lidarcal uses for point-to-line residuals (Duff et al. 2017)."""
+    sign = np.copysign(1.0, n[2])
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    b1 = np.array([1.0 + sign * n[0] ** 2 * a, sign * b, -sign * n[0]])
+    b2 = np.array([b, sign + n[1] ** 2 * a, -n[1]])
+    return b1, b2
+
+
+def transform_points(t: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return p @ t[:3, :3].T + t[:3, 3]
+
+
+def plane_residuals(
+    points: np.ndarray, plane: np.ndarray, t: np.ndarray, frame: str = "target"
+) -> tuple[np.ndarray, np.ndarray]:
+    """r (N,) and J (N, 6) of points against a plane [n, d] (left perturbation of t)."""
+    n, d = plane[:3] / np.linalg.norm(plane[:3]), plane[3] / np.linalg.norm(plane[:3])
+    if frame == "target":
+        q = transform_points(t, points)
+        r = q @ n + d
+        j = np.hstack([np.tile(n, (len(q), 1)), np.cross(q, n)])
+    else:
+        m = t[:3, :3] @ n
+        r = points @ m + d - m @ t[:3, 3]
+        j = np.hstack([np.tile(-m, (len(points), 1)), np.cross(m, points)])
+    return r, j
+
+
+def line_residuals(
+    points: np.ndarray, line: np.ndarray, t: np.ndarray, frame: str = "target"
+) -> tuple[np.ndarray, np.ndarray]:
+    """r (N, 2) and J (N, 2, 6) of points against a line [p, u] (left perturbation of t)."""
+    c, u = line[:3], line[3:] / np.linalg.norm(line[3:])
+    e1, e2 = orthonormal_basis(u)
+    if frame == "target":
+        q = transform_points(t, points)
+        basis = np.stack([e1, e2])
+        r = (q - c) @ basis.T
+        j = np.stack([np.hstack([np.tile(e, (len(q), 1)), np.cross(q, e)]) for e in basis], axis=1)
+    else:
+        basis = np.stack([t[:3, :3] @ e1, t[:3, :3] @ e2])
+        c_ref = t[:3, :3] @ c + t[:3, 3]
+        r = (points - c_ref) @ basis.T
+        j = np.stack(
+            [np.hstack([np.tile(-e, (len(points), 1)), np.cross(e, points)]) for e in basis],
+            axis=1,
+        )
+    return r, j
+
+
+def numeric_jacobian(f, t: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """Central differences of f(T) (any shape) w.r.t. the left perturbation; last axis is 6."""
+    cols = []
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = h
+        cols.append((f(se3_exp(d) @ t) - f(se3_exp(-d) @ t)) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+def robust_rho(s: np.ndarray, loss: str, scale: float) -> np.ndarray:
+    """rho(s) of SciPy's least_squares for s = r^2 with f_scale = scale."""
+    if loss == "squared":
+        return s
+    z = s / scale**2
+    if loss == "huber":
+        return scale**2 * np.where(z <= 1, z, 2 * np.sqrt(z) - 1)
+    if loss == "cauchy":
+        return scale**2 * np.log1p(z)
+    raise ValueError(loss)
+
+
+def plane_cost(
+    t: np.ndarray,
+    planes: np.ndarray,
+    points: Sequence[np.ndarray],
+    frames: Sequence[str],
+    loss: str = "squared",
+    scale: float = 1.0,
+) -> float:
+    r = np.concatenate(
+        [plane_residuals(p, pl, t, f)[0] for pl, p, f in zip(planes, points, frames, strict=False)]
+    )
+    return float(0.5 * np.sum(robust_rho(r**2, loss, scale)))
+
+
+def line_cost(
+    t: np.ndarray,
+    lines: np.ndarray,
+    points: Sequence[np.ndarray],
+    frames: Sequence[str],
+    loss: str = "squared",
+    scale: float = 1.0,
+) -> float:
+    s = np.concatenate(
+        [
+            np.sum(line_residuals(p, ln, t, f)[0] ** 2, axis=1)
+            for ln, p, f in zip(lines, points, frames, strict=False)
+        ]
+    )
+    return float(0.5 * np.sum(robust_rho(s, loss, scale)))
+
+
+def _pose(x: np.ndarray) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = so3_exp(x[3:])
+    t[:3, 3] = x[:3]
+    return t
+
+
+def solve_planes(
+    planes: np.ndarray,
+    points: Sequence[np.ndarray],
+    frames: Sequence[str],
+    initial: np.ndarray,
+    loss: str = "squared",
+    scale: float = 1.0,
+) -> tuple[np.ndarray, float]:
+    """Minimise the point-to-plane cost with SciPy (rotation vector + translation parameters)."""
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        t = _pose(x)
+        return np.concatenate(
+            [
+                plane_residuals(p, pl, t, f)[0]
+                for pl, p, f in zip(planes, points, frames, strict=False)
+            ]
+        )
+
+    x0 = np.concatenate([initial[:3, 3], so3_log(initial[:3, :3])])
+    sol = least_squares(
+        fun,
+        x0,
+        method="trf",
+        loss="linear" if loss == "squared" else loss,
+        f_scale=scale,
+        jac="3-point",
+        ftol=1e-15,
+        xtol=1e-15,
+        gtol=1e-15,
+        max_nfev=2000,
+    )
+    t = _pose(sol.x)
+    return t, plane_cost(t, planes, points, frames, loss, scale)
+
+
+def solve_lines(
+    lines: np.ndarray,
+    points: Sequence[np.ndarray],
+    frames: Sequence[str],
+    initial: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """Least-squares point-to-line alignment with SciPy."""
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        t = _pose(x)
+        return np.concatenate(
+            [
+                line_residuals(p, ln, t, f)[0].ravel()
+                for ln, p, f in zip(lines, points, frames, strict=False)
+            ]
+        )
+
+    x0 = np.concatenate([initial[:3, 3], so3_log(initial[:3, :3])])
+    sol = least_squares(fun, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=5000)
+    t = _pose(sol.x)
+    return t, line_cost(t, lines, points, frames)
