@@ -208,7 +208,7 @@ pub fn orthonormal_basis(n: &Unit<Vector3<f64>>) -> (Vector3<f64>, Vector3<f64>)
 fn unit_vector(what: &str, v: &Vector3<f64>) -> Result<(Unit<Vector3<f64>>, f64)> {
     ensure_finite(what, v.iter())?;
     let norm = v.norm();
-    if !(norm > 1e-12) {
+    if norm <= 1e-12 {
         return Err(Error::InvalidInput(format!(
             "{what} has zero length (|v| = {norm:e})"
         )));

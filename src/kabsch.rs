@@ -113,7 +113,8 @@ fn solve(h: &Matrix3<f64>, norms: f64) -> Result<KabschSolution> {
     let mut order = [0usize, 1, 2];
     order.sort_by(|&i, &j| s[j].total_cmp(&s[i]));
     let sorted = Vector3::new(s[order[0]], s[order[1]], s[order[2]]);
-    if !(sorted[0] > 0.0) || sorted[1] < MIN_SINGULAR_RATIO * sorted[0] {
+    // Inputs are finite (checked above), so the singular values are too.
+    if sorted[0] <= 0.0 || sorted[1] < MIN_SINGULAR_RATIO * sorted[0] {
         return Err(Error::Degenerate(format!(
             "the vectors do not determine a rotation: they span fewer than two directions \
              (singular values {:.3e}, {:.3e}, {:.3e}; need s2/s1 >= {MIN_SINGULAR_RATIO:e})",
