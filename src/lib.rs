@@ -57,6 +57,7 @@
 )]
 
 pub mod error;
+pub mod fit;
 pub mod geometry;
 pub mod kabsch;
 pub mod lm;
