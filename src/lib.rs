@@ -61,6 +61,7 @@ pub mod fit;
 pub mod geometry;
 pub mod kabsch;
 pub mod lm;
+pub mod ransac;
 pub mod residuals;
 
 #[cfg(feature = "python")]

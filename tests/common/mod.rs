@@ -61,3 +61,60 @@ pub fn corner_groups(n_per_plane: usize, sigma: f64, seed: u64) -> Vec<PlaneGrou
 pub fn perturbed_start() -> Isometry3<f64> {
     se3_exp(&Vector6::new(0.2, -0.25, 0.15, 0.06, 0.05, -0.06)) * true_pose()
 }
+
+/// A wall corner cloud in the sensor frame: three planes meeting at `corner`, each sampled on a
+/// 4 m x 4 m patch that reaches the intersection lines, with Gaussian noise `sigma` along the
+/// normal, plus `clutter` uniform points in a 10 m box. Returns the points and the true planes.
+pub fn corner_cloud(
+    n_per_plane: usize,
+    clutter: usize,
+    sigma: f64,
+    seed: u64,
+) -> (Vec<Point3<f64>>, [Plane; 3]) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let corner = Point3::new(6.0, 4.0, -1.5);
+    // Left and right walls 100 degrees apart, a floor; all seen from the origin.
+    let left = Vector3::new(-1.0, -0.2, 0.0).normalize();
+    let right = Vector3::new(-0.3, -1.0, 0.05).normalize();
+    let floor = Vector3::new(0.02, 0.0, 1.0).normalize();
+    let normals = [left, right, floor];
+    let planes = normals.map(|n| Plane::from_point_normal(&corner, &n).unwrap());
+    let mut points = Vec::new();
+    for (k, plane) in planes.iter().enumerate() {
+        // Span each plane by the directions of its two intersection lines with the others, so
+        // the patch starts exactly at the corner edges.
+        let others: Vec<_> = (0..3).filter(|&j| j != k).collect();
+        let e1 = plane.normal.cross(&normals[others[0]]).normalize();
+        let e2 = plane.normal.cross(&normals[others[1]]).normalize();
+        // Orient both edges toward the sensor side of the other planes.
+        let e1 = if planes[others[1]].signed_distance(&(corner + e1)) > 0.0 {
+            e1
+        } else {
+            -e1
+        };
+        let e2 = if planes[others[0]].signed_distance(&(corner + e2)) > 0.0 {
+            e2
+        } else {
+            -e2
+        };
+        for _ in 0..n_per_plane {
+            let a: f64 = rng.random_range(0.0..4.0);
+            let b: f64 = rng.random_range(0.0..4.0);
+            let noise = gaussian(&mut rng) * sigma;
+            points.push(corner + e1 * a + e2 * b + plane.normal.into_inner() * noise);
+        }
+    }
+    for _ in 0..clutter {
+        points.push(Point3::new(
+            rng.random_range(-2.0..8.0),
+            rng.random_range(-4.0..6.0),
+            rng.random_range(-1.5..3.5),
+        ));
+    }
+    (points, planes)
+}
+
+/// Angle in degrees between two unit normals, ignoring sign.
+pub fn normal_error_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.dot(b).abs().min(1.0).acos().to_degrees()
+}

@@ -1,0 +1,371 @@
+//! Plane estimation: the 3-point estimator, its scoring kernel, single-plane RANSAC and the
+//! extraction of several planes with a joint refinement.
+//!
+//! # Why a joint refinement
+//! Extracting planes one after another (as the planar-calibration seed does) hands the first plane
+//! every point within the threshold, including the points of its neighbours near their
+//! intersection lines. Those points pull the first planes' least-squares fits toward the
+//! neighbours: a small but systematic tilt. [`extract_planes`] therefore reassigns every point to
+//! its nearest plane, drops points within the threshold of two planes, and refits, for a few rounds.
+
+use nalgebra::Point3;
+
+use super::consensus::{ransac, Score, GROUP};
+use super::{Cloud, Estimator, RansacOptions, RansacResult};
+use crate::error::{ensure_finite, Error, Result};
+use crate::fit::Moments;
+use crate::geometry::Plane;
+
+/// A sample is degenerate when the sine of the angle between its two edges is below this.
+pub const MIN_SAMPLE_SINE: f64 = 1e-6;
+
+/// Points per lane-accumulator block in the kernels: `f32` partial sums are flushed to `f64`
+/// every block, bounding their rounding error.
+const BLOCK: usize = 1024;
+/// SIMD-friendly lane count of the kernels' accumulators.
+const LANES: usize = 8;
+
+/// The 3-point plane estimator.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PlaneEstimator;
+
+/// MSAC scores of up to [`GROUP`] planes (centred `f32` coefficients `[a, b, c, d]`) over the
+/// structure-of-arrays cloud, in one pass.
+pub fn score_planes_f32(
+    count: bool,
+    x: &[f32],
+    y: &[f32],
+    z: &[f32],
+    models: &[[f32; 4]],
+    threshold: f32,
+    out: &mut [Score],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2, checked just above.
+        unsafe { score_planes_f32_avx2(count, x, y, z, models, threshold, out) };
+        return;
+    }
+    if count {
+        score_planes_f32_impl::<true>(x, y, z, models, threshold, out)
+    } else {
+        score_planes_f32_impl::<false>(x, y, z, models, threshold, out)
+    }
+}
+
+/// The same kernel compiled for AVX2 (8 lanes per instruction). FMA is deliberately not enabled:
+/// every lane performs the same operations in the same order as the baseline build, so results
+/// are bit-identical on machines with and without AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn score_planes_f32_avx2(
+    count: bool,
+    x: &[f32],
+    y: &[f32],
+    z: &[f32],
+    models: &[[f32; 4]],
+    threshold: f32,
+    out: &mut [Score],
+) {
+    if count {
+        score_planes_f32_impl::<true>(x, y, z, models, threshold, out)
+    } else {
+        score_planes_f32_impl::<false>(x, y, z, models, threshold, out)
+    }
+}
+
+#[inline(always)]
+fn score_planes_f32_impl<const COUNT: bool>(
+    x: &[f32],
+    y: &[f32],
+    z: &[f32],
+    planes: &[[f32; 4]],
+    threshold: f32,
+    out: &mut [Score],
+) {
+    let count = planes.len().min(GROUP).min(out.len());
+    let mut coeffs = [[0f32; 4]; GROUP];
+    coeffs[..count].copy_from_slice(&planes[..count]);
+    let t2 = threshold * threshold;
+    let mut total_cost = [0f64; GROUP];
+    let mut total_inliers = [0usize; GROUP];
+    let n = x.len().min(y.len()).min(z.len());
+    for start in (0..n).step_by(BLOCK) {
+        let end = (start + BLOCK).min(n);
+        let (xb, yb, zb) = (&x[start..end], &y[start..end], &z[start..end]);
+        let mut cost = [[0f32; LANES]; GROUP];
+        let mut hits = [[0u32; LANES]; GROUP];
+        let mut xc = xb.chunks_exact(LANES);
+        let mut yc = yb.chunks_exact(LANES);
+        let mut zc = zb.chunks_exact(LANES);
+        for ((xs, ys), zs) in (&mut xc).zip(&mut yc).zip(&mut zc) {
+            for k in 0..GROUP {
+                let [a, b, c, d] = coeffs[k];
+                for l in 0..LANES {
+                    let dist = a * xs[l] + b * ys[l] + c * zs[l] + d;
+                    let d2 = dist * dist;
+                    let inside = d2 < t2;
+                    cost[k][l] += if inside { d2 } else { t2 };
+                    if COUNT {
+                        hits[k][l] += inside as u32;
+                    }
+                }
+            }
+        }
+        for ((xs, ys), zs) in xc
+            .remainder()
+            .iter()
+            .zip(yc.remainder())
+            .zip(zc.remainder())
+        {
+            for k in 0..GROUP {
+                let [a, b, c, d] = coeffs[k];
+                let dist = a * xs + b * ys + c * zs + d;
+                let d2 = dist * dist;
+                let inside = d2 < t2;
+                cost[k][0] += if inside { d2 } else { t2 };
+                if COUNT {
+                    hits[k][0] += inside as u32;
+                }
+            }
+        }
+        for k in 0..GROUP {
+            total_cost[k] += cost[k].iter().map(|&c| f64::from(c)).sum::<f64>();
+            total_inliers[k] += hits[k].iter().map(|&h| h as usize).sum::<usize>();
+        }
+    }
+    for k in 0..count {
+        out[k] = Score {
+            cost: total_cost[k],
+            inliers: total_inliers[k],
+        };
+    }
+}
+
+/// A plane's coefficients in the cloud's centred `f32` frame.
+pub fn centred_coefficients(plane: &Plane, cloud: &Cloud<'_>) -> [f32; 4] {
+    let n = plane.normal;
+    let d = plane.offset + n.dot(&cloud.center());
+    [n.x as f32, n.y as f32, n.z as f32, d as f32]
+}
+
+impl Estimator for PlaneEstimator {
+    type Model = Plane;
+    const SAMPLE_SIZE: usize = 3;
+    const NAME: &'static str = "plane";
+
+    fn minimal_model(&self, points: &[Point3<f64>], sample: &[usize]) -> Option<Plane> {
+        let p0 = points.get(*sample.first()?)?;
+        let e1 = points.get(*sample.get(1)?)? - p0;
+        let e2 = points.get(*sample.get(2)?)? - p0;
+        let normal = e1.cross(&e2);
+        if normal.norm() <= MIN_SAMPLE_SINE * e1.norm() * e2.norm() {
+            return None;
+        }
+        Plane::from_point_normal(p0, &normal).ok()
+    }
+
+    fn refit(&self, points: &[Point3<f64>], indices: &[usize]) -> Option<Plane> {
+        let moments = Moments::from_points(indices.iter().filter_map(|&i| points.get(i)));
+        moments.plane().ok().map(|fit| fit.plane)
+    }
+
+    fn squared_distance(&self, model: &Plane, p: &Point3<f64>) -> f64 {
+        let d = model.signed_distance(p);
+        d * d
+    }
+
+    fn score(
+        &self,
+        cloud: &Cloud<'_>,
+        models: &[Plane],
+        threshold: f64,
+        count_inliers: bool,
+        out: &mut [Score],
+    ) {
+        let (x, y, z) = cloud.soa();
+        let coeffs: Vec<[f32; 4]> = models
+            .iter()
+            .map(|m| centred_coefficients(m, cloud))
+            .collect();
+        for (group, scores) in coeffs.chunks(GROUP).zip(out.chunks_mut(GROUP)) {
+            score_planes_f32(count_inliers, x, y, z, group, threshold as f32, scores);
+        }
+    }
+
+    fn check_cloud(&self, points: &[Point3<f64>]) -> Result<()> {
+        Moments::from_points(points).plane().map(|_| ())
+    }
+}
+
+/// The plane with the most support (MSAC) among `points`, refitted by least squares on its
+/// inliers. The normal points toward the origin (the sensor).
+pub fn ransac_plane(
+    points: &[Point3<f64>],
+    options: &RansacOptions,
+) -> Result<RansacResult<Plane>> {
+    let mut result = ransac(&PlaneEstimator, points, options)?;
+    result.model = result.model.oriented_toward(&Point3::origin());
+    Ok(result)
+}
+
+/// Options of [`extract_planes`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExtractOptions {
+    /// Number of planes wanted.
+    pub count: usize,
+    /// A plane needs at least this many inliers to count.
+    pub min_inliers: usize,
+    /// Rounds of the joint reassignment and refit (0 keeps the sequential result).
+    pub refinement_rounds: usize,
+    /// Options of each RANSAC run (threshold, confidence, cap, seed).
+    pub ransac: RansacOptions,
+}
+
+impl ExtractOptions {
+    /// `count` planes with threshold `distance_threshold`, at least 50 inliers each, 3 joint rounds.
+    pub fn new(count: usize, distance_threshold: f64) -> Self {
+        ExtractOptions {
+            count,
+            min_inliers: 50,
+            refinement_rounds: 3,
+            ransac: RansacOptions::new(distance_threshold),
+        }
+    }
+}
+
+/// A plane found by [`extract_planes`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExtractedPlane {
+    /// The plane, normal toward the origin (the sensor).
+    pub plane: Plane,
+    /// Indices of its points (ascending): within the threshold of this plane and of no other.
+    pub inliers: Vec<usize>,
+    /// Root-mean-square distance of the inliers.
+    pub rms: f64,
+    /// Hypotheses drawn by the RANSAC run that found it.
+    pub hypotheses: usize,
+}
+
+/// Assigns each point to the only plane within `threshold` of it; points near none or near two
+/// or more planes (intersection lines) are left out.
+fn assign(points: &[Point3<f64>], planes: &[Plane], threshold: f64) -> Vec<Vec<usize>> {
+    let mut groups = vec![Vec::new(); planes.len()];
+    for (i, p) in points.iter().enumerate() {
+        let mut owner = None;
+        let mut near = 0;
+        for (j, plane) in planes.iter().enumerate() {
+            if plane.signed_distance(p).abs() < threshold {
+                near += 1;
+                owner = Some(j);
+            }
+        }
+        if let (1, Some(j)) = (near, owner) {
+            groups[j].push(i);
+        }
+    }
+    groups
+}
+
+fn mix_seed(seed: u64, k: usize) -> u64 {
+    // Distinct, well-spread seeds per extracted plane (SplitMix64 increment).
+    seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+/// Extracts `options.count` planes: sequential RANSAC (each plane's inliers removed before the
+/// next), then a joint refinement (see the module docs). Planes are returned largest first.
+///
+/// Errors: invalid options or points as for [`ransac_plane`]; [`Error::Calibration`] when fewer
+/// than `count` planes with at least `min_inliers` inliers exist.
+pub fn extract_planes(
+    points: &[Point3<f64>],
+    options: &ExtractOptions,
+) -> Result<Vec<ExtractedPlane>> {
+    options.ransac.validate()?;
+    ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+    if options.count == 0 {
+        return Err(Error::InvalidInput("count must be at least 1".into()));
+    }
+    let threshold = options.ransac.distance_threshold;
+    let min_inliers = options.min_inliers.max(PlaneEstimator::SAMPLE_SIZE);
+    let mut taken = vec![false; points.len()];
+    let mut found: Vec<(Plane, usize)> = Vec::new();
+    for k in 0..options.count {
+        let remaining: Vec<usize> = (0..points.len()).filter(|&i| !taken[i]).collect();
+        if remaining.len() < min_inliers {
+            break;
+        }
+        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
+        let ransac_options = RansacOptions {
+            seed: mix_seed(options.ransac.seed, k),
+            ..options.ransac
+        };
+        let result = match ransac(&PlaneEstimator, &subset, &ransac_options) {
+            Ok(r) => r,
+            Err(Error::Degenerate(_)) => break,
+            Err(e) => return Err(e),
+        };
+        if result.inliers.len() < min_inliers {
+            break;
+        }
+        for &i in &result.inliers {
+            taken[remaining[i]] = true;
+        }
+        found.push((result.model, result.hypotheses));
+    }
+    if found.len() < options.count {
+        return Err(Error::Calibration(format!(
+            "only {} plane(s) with at least {min_inliers} inliers within {threshold} m were found, \
+             {} wanted",
+            found.len(),
+            options.count
+        )));
+    }
+
+    let mut planes: Vec<Plane> = found.iter().map(|(p, _)| *p).collect();
+    for _ in 0..options.refinement_rounds {
+        let groups = assign(points, &planes, threshold);
+        let mut changed = false;
+        for (plane, group) in planes.iter_mut().zip(&groups) {
+            if let Some(refit) = PlaneEstimator.refit(points, group) {
+                changed |= refit != *plane;
+                *plane = refit;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let groups = assign(points, &planes, threshold);
+    let mut extracted: Vec<ExtractedPlane> = planes
+        .iter()
+        .zip(groups)
+        .zip(&found)
+        .map(|((plane, inliers), (_, hypotheses))| {
+            let rms = if inliers.is_empty() {
+                0.0
+            } else {
+                (inliers
+                    .iter()
+                    .map(|&i| plane.signed_distance(&points[i]).powi(2))
+                    .sum::<f64>()
+                    / inliers.len() as f64)
+                    .sqrt()
+            };
+            ExtractedPlane {
+                plane: plane.oriented_toward(&Point3::origin()),
+                inliers,
+                rms,
+                hypotheses: *hypotheses,
+            }
+        })
+        .collect();
+    if let Some(weak) = extracted.iter().find(|p| p.inliers.len() < min_inliers) {
+        return Err(Error::Calibration(format!(
+            "after the joint refinement a plane keeps only {} inliers (< {min_inliers})",
+            weak.inliers.len()
+        )));
+    }
+    extracted.sort_by_key(|p| std::cmp::Reverse(p.inliers.len()));
+    Ok(extracted)
+}
