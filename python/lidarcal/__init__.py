@@ -8,7 +8,9 @@ This release holds the numerical kernels the calibration methods build on:
 * :func:`kabsch` -- the rotation best aligning two sets of vectors;
 * :func:`so3_exp`, :func:`so3_log`, :func:`se3_exp`, :func:`se3_log` -- the Lie group maps;
 * :func:`refine_point_to_plane`, :func:`refine_point_to_line` -- Levenberg-Marquardt refinement
-  of a transform from point-to-plane or point-to-line residuals, returning a :class:`RefineResult`.
+  of a transform from point-to-plane or point-to-line residuals, returning a :class:`RefineResult`;
+* :func:`ransac_plane`, :func:`ransac_line`, :func:`extract_planes` -- deterministic parallel
+  RANSAC, returning :class:`Plane` and :class:`Line` objects with their inliers.
 
 Bad input raises ``ValueError`` naming the problem; a calibration that cannot be trusted raises
 :class:`CalibrationError`.
@@ -16,9 +18,14 @@ Bad input raises ``ValueError`` naming the problem; a calibration that cannot be
 
 from lidarcal._lidarcal import (
     CalibrationError,
+    Line,
+    Plane,
     RefineResult,
     __version__,
+    extract_planes,
     kabsch,
+    ransac_line,
+    ransac_plane,
     refine_point_to_line,
     refine_point_to_plane,
     se3_exp,
@@ -29,9 +36,14 @@ from lidarcal._lidarcal import (
 
 __all__ = [
     "CalibrationError",
+    "Line",
+    "Plane",
     "RefineResult",
     "__version__",
+    "extract_planes",
     "kabsch",
+    "ransac_line",
+    "ransac_plane",
     "refine_point_to_line",
     "refine_point_to_plane",
     "se3_exp",

@@ -8,6 +8,7 @@ import numpy.typing as npt
 
 ArrayLike = npt.ArrayLike
 F64Array = npt.NDArray[np.float64]
+I64Array = npt.NDArray[np.int64]
 Frame = Literal["target", "reference"]
 LossName = Literal["squared", "linear", "huber", "cauchy"]
 
@@ -41,6 +42,72 @@ class RefineResult:
     @property
     def covariance(self) -> F64Array | None: ...
 
+class Plane:
+    """A plane ``normal . p + offset = 0`` found in a point cloud, with its inliers."""
+
+    @property
+    def normal(self) -> F64Array:
+        """(3,) unit normal, pointing toward the sensor."""
+    @property
+    def offset(self) -> float: ...
+    @property
+    def coefficients(self) -> F64Array:
+        """(4,) ``[nx, ny, nz, d]``."""
+    @property
+    def inliers(self) -> I64Array:
+        """int64 indices of the inlier points, ascending."""
+    @property
+    def rms(self) -> float: ...
+    @property
+    def hypotheses(self) -> int: ...
+
+class Line:
+    """A 3D line through ``point`` along the unit ``direction``, with its inliers."""
+
+    @property
+    def point(self) -> F64Array: ...
+    @property
+    def direction(self) -> F64Array: ...
+    @property
+    def inliers(self) -> I64Array: ...
+    @property
+    def rms(self) -> float: ...
+    @property
+    def hypotheses(self) -> int: ...
+
+def ransac_plane(
+    points: ArrayLike,
+    distance_threshold: float,
+    *,
+    confidence: float = 0.999,
+    max_iterations: int = 10000,
+    seed: int = 0,
+) -> Plane: ...
+def ransac_line(
+    points: ArrayLike,
+    distance_threshold: float,
+    *,
+    confidence: float = 0.999,
+    max_iterations: int = 10000,
+    seed: int = 0,
+) -> Line: ...
+def extract_planes(
+    points: ArrayLike,
+    count: int = 3,
+    distance_threshold: float = 0.05,
+    *,
+    min_inliers: int = 50,
+    refinement_rounds: int = 3,
+    confidence: float = 0.999,
+    max_iterations: int = 10000,
+    seed: int = 0,
+) -> list[Plane]: ...
+def score_planes(
+    points: ArrayLike, planes: ArrayLike, distance_threshold: float
+) -> tuple[F64Array, I64Array]: ...
+def score_lines(
+    points: ArrayLike, lines: ArrayLike, distance_threshold: float
+) -> tuple[F64Array, I64Array]: ...
 def kabsch(a: ArrayLike, b: ArrayLike, weights: ArrayLike | None = None) -> F64Array:
     """The rotation ``R`` minimising ``sum w_i |R b_i - a_i|^2``."""
 

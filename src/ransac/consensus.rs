@@ -3,7 +3,7 @@
 use nalgebra::Point3;
 
 use super::sampler::draw_batch;
-use super::{inliers, Cloud, Estimator, RansacOptions, RansacResult};
+use super::{inliers, rms, Cloud, Estimator, RansacOptions, RansacResult};
 use crate::error::{Error, Result};
 
 /// Hypotheses per batch. Fixed, so the sequence of batches (and the result) never depends on the
@@ -196,6 +196,7 @@ pub fn ransac<E: Estimator>(
     let support = inliers(estimator, points, &model, threshold);
     Ok(RansacResult {
         model,
+        rms: rms(estimator, points, &model, &support),
         inliers: support,
         cost: score.cost,
         hypotheses: drawn,

@@ -105,6 +105,8 @@ pub struct RansacResult<M> {
     pub model: M,
     /// Indices (into the input) of the points within the threshold of `model`, ascending.
     pub inliers: Vec<usize>,
+    /// Root-mean-square distance of the inliers to `model`.
+    pub rms: f64,
     /// MSAC cost of the best hypothesis before the final refit (`f32` scoring).
     pub cost: f64,
     /// Hypotheses drawn (including degenerate samples that were rejected).
@@ -222,6 +224,24 @@ pub trait Estimator: Sync {
 
     /// Refuses clouds on which no model of this type is determined (checked before sampling).
     fn check_cloud(&self, points: &[Point3<f64>]) -> Result<()>;
+}
+
+/// Root-mean-square distance of `points[indices]` to `model` (0 for no indices).
+pub fn rms<E: Estimator>(
+    estimator: &E,
+    points: &[Point3<f64>],
+    model: &E::Model,
+    indices: &[usize],
+) -> f64 {
+    if indices.is_empty() {
+        return 0.0;
+    }
+    let sum: f64 = indices
+        .iter()
+        .filter_map(|&i| points.get(i))
+        .map(|p| estimator.squared_distance(model, p))
+        .sum();
+    (sum / indices.len() as f64).sqrt()
 }
 
 /// Indices of the points within `threshold` of `model` (strictly), ascending.

@@ -341,23 +341,11 @@ pub fn extract_planes(
         .iter()
         .zip(groups)
         .zip(&found)
-        .map(|((plane, inliers), (_, hypotheses))| {
-            let rms = if inliers.is_empty() {
-                0.0
-            } else {
-                (inliers
-                    .iter()
-                    .map(|&i| plane.signed_distance(&points[i]).powi(2))
-                    .sum::<f64>()
-                    / inliers.len() as f64)
-                    .sqrt()
-            };
-            ExtractedPlane {
-                plane: plane.oriented_toward(&Point3::origin()),
-                inliers,
-                rms,
-                hypotheses: *hypotheses,
-            }
+        .map(|((plane, inliers), (_, hypotheses))| ExtractedPlane {
+            plane: plane.oriented_toward(&Point3::origin()),
+            rms: super::rms(&PlaneEstimator, points, plane, &inliers),
+            inliers,
+            hypotheses: *hypotheses,
         })
         .collect();
     if let Some(weak) = extracted.iter().find(|p| p.inliers.len() < min_inliers) {

@@ -261,3 +261,105 @@ def solve_lines(
     sol = least_squares(fun, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=5000)
     t = _pose(sol.x)
     return t, line_cost(t, lines, points, frames)
+
+
+# --- RANSAC -------------------------------------------------------------------------------
+
+
+def bbox_center(points: np.ndarray) -> np.ndarray:
+    """The bounding-box midpoint lidarcal centres its f32 scoring copy on."""
+    return (points.min(axis=0) + points.max(axis=0)) * 0.5
+
+
+def _unit_plane(plane: np.ndarray) -> tuple[float, float, float, float]:
+    """Normalise like lidarcal (norm = sqrt(x*x + y*y + z*z), in that order)."""
+    a, b, c, d = (float(v) for v in plane)
+    norm = np.sqrt(a * a + b * b + c * c)
+    return a / norm, b / norm, c / norm, d / norm
+
+
+def score_planes_f32(
+    points: np.ndarray, planes: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """MSAC cost and inlier count of each plane, emulating lidarcal's f32 arithmetic exactly
+    (same centring, same operation order) so the inlier counts match bit for bit."""
+    center = bbox_center(points[:, :3])
+    x, y, z = ((points[:, i] - center[i]).astype(np.float32) for i in range(3))
+    t2 = np.float32(threshold) * np.float32(threshold)
+    costs, counts = [], []
+    for plane in planes:
+        a, b, c, d = _unit_plane(plane)
+        d_centred = d + (a * center[0] + b * center[1] + c * center[2])
+        a32, b32, c32, d32 = (np.float32(v) for v in (a, b, c, d_centred))
+        dist = a32 * x + b32 * y + c32 * z + d32
+        d2 = dist * dist
+        inside = d2 < t2
+        costs.append(float(np.sum(np.where(inside, d2, t2).astype(np.float64))))
+        counts.append(int(inside.sum()))
+    return np.array(costs), np.array(counts)
+
+
+def fit_plane(points: np.ndarray) -> np.ndarray:
+    """Total-least-squares plane [n, d] (normal toward the origin) by SVD."""
+    mean = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - mean)
+    n = vt[2]
+    d = -n @ mean
+    return np.concatenate([n, [d]]) if d >= 0 else -np.concatenate([n, [d]])
+
+
+def fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Total-least-squares line (mean, unit direction) by SVD."""
+    mean = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - mean)
+    return mean, vt[0]
+
+
+def corner_cloud(
+    rng: np.random.Generator, n_per_plane: int, clutter: int, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Three planes of a wall corner (sampled up to the intersection lines) plus clutter.
+    Returns (points (N, 3), true planes (3, 4) with normals toward the origin)."""
+    corner = np.array([6.0, 4.0, -1.5])
+    normals = np.array([[-1.0, -0.2, 0.0], [-0.3, -1.0, 0.05], [0.02, 0.0, 1.0]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    planes = np.hstack([normals, -(normals @ corner)[:, None]])
+    pts = []
+    for k in range(3):
+        others = [j for j in range(3) if j != k]
+        edges = []
+        for o, other in zip(others, reversed(others), strict=True):
+            e = np.cross(normals[k], normals[o])
+            e /= np.linalg.norm(e)
+            # Point the edge to the sensor side of the remaining plane.
+            if planes[other, :3] @ (corner + e) + planes[other, 3] < 0:
+                e = -e
+            edges.append(e)
+        ab = rng.uniform(0.0, 4.0, (n_per_plane, 2))
+        noise = rng.normal(0.0, sigma, (n_per_plane, 1))
+        pts.append(corner + ab[:, :1] * edges[0] + ab[:, 1:] * edges[1] + noise * normals[k])
+    lo, hi = np.array([-2.0, -4.0, -1.5]), np.array([8.0, 6.0, 3.5])
+    pts.append(rng.uniform(lo, hi, (clutter, 3)))
+    return np.vstack(pts), planes
+
+
+def score_lines_f32(
+    points: np.ndarray, lines: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """MSAC cost and inlier count of each line [p, u], emulating lidarcal's f32 arithmetic."""
+    center = bbox_center(points[:, :3])
+    x, y, z = ((points[:, i] - center[i]).astype(np.float32) for i in range(3))
+    t2 = np.float32(threshold) * np.float32(threshold)
+    costs, counts = [], []
+    for line in lines:
+        ux, uy, uz = (float(v) for v in line[3:])
+        norm = np.sqrt(ux * ux + uy * uy + uz * uz)
+        u = [np.float32(v / norm) for v in (ux, uy, uz)]
+        c = [np.float32(float(line[i]) - center[i]) for i in range(3)]
+        qx, qy, qz = x - c[0], y - c[1], z - c[2]
+        along = u[0] * qx + u[1] * qy + u[2] * qz
+        d2 = qx * qx + qy * qy + qz * qz - along * along
+        inside = d2 < t2
+        costs.append(float(np.sum(np.where(inside, d2, t2).astype(np.float64))))
+        counts.append(int(inside.sum()))
+    return np.array(costs), np.array(counts)

@@ -1,0 +1,309 @@
+//! Python wrappers of RANSAC: `ransac_plane`, `ransac_line`, `extract_planes`, the `Plane` and
+//! `Line` result classes, and the raw scoring kernels (for parity tests and throughput figures).
+
+use nalgebra::{Point3, Vector3, Vector4};
+use numpy::ndarray::Ix1;
+use numpy::PyArray1;
+use pyo3::prelude::*;
+
+use super::arrays::{self, to_numpy};
+use super::run;
+use crate::geometry::{Line, Plane};
+use crate::ransac::consensus::{score_models, Score};
+use crate::ransac::line::{ransac_line as rs_ransac_line, LineEstimator};
+use crate::ransac::plane::{extract_planes as rs_extract_planes, ransac_plane as rs_ransac_plane};
+use crate::ransac::plane::{ExtractOptions, PlaneEstimator};
+use crate::ransac::{Cloud, RansacOptions};
+
+fn indices_to_numpy<'py>(py: Python<'py>, indices: &[usize]) -> Bound<'py, PyArray1<i64>> {
+    PyArray1::from_iter(py, indices.iter().map(|&i| i as i64))
+}
+
+/// A plane `normal . p + offset = 0` found in a point cloud, with its inliers.
+#[pyclass(frozen, module = "lidarcal", name = "Plane")]
+pub(crate) struct PyPlane {
+    pub(crate) plane: Plane,
+    pub(crate) inliers: Vec<usize>,
+    pub(crate) rms: f64,
+    pub(crate) hypotheses: usize,
+}
+
+#[pymethods]
+impl PyPlane {
+    /// (3,) unit normal, pointing toward the sensor (the origin of the cloud's frame).
+    #[getter]
+    fn normal<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        to_numpy(py, Ix1(3), self.plane.normal.as_slice().to_vec())
+    }
+    /// Offset d of normal . p + d = 0 (the distance of the sensor to the plane).
+    #[getter]
+    fn offset(&self) -> f64 {
+        self.plane.offset
+    }
+    /// (4,) coefficients [nx, ny, nz, d].
+    #[getter]
+    fn coefficients<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        to_numpy(py, Ix1(4), self.plane.coefficients().as_slice().to_vec())
+    }
+    /// int64 indices of the inlier points in the input, ascending.
+    #[getter]
+    fn inliers<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        indices_to_numpy(py, &self.inliers)
+    }
+    /// Root-mean-square distance of the inliers to the plane.
+    #[getter]
+    fn rms(&self) -> f64 {
+        self.rms
+    }
+    /// Hypotheses drawn by the RANSAC run that found the plane.
+    #[getter]
+    fn hypotheses(&self) -> usize {
+        self.hypotheses
+    }
+    fn __repr__(&self) -> String {
+        let n = self.plane.normal;
+        format!(
+            "Plane(normal=[{:.6}, {:.6}, {:.6}], offset={:.6}, inliers={}, rms={:.4})",
+            n.x,
+            n.y,
+            n.z,
+            self.plane.offset,
+            self.inliers.len(),
+            self.rms
+        )
+    }
+}
+
+/// A 3D line through `point` along the unit `direction`, with its inliers.
+#[pyclass(frozen, module = "lidarcal", name = "Line")]
+pub(crate) struct PyLine {
+    line: Line,
+    inliers: Vec<usize>,
+    rms: f64,
+    hypotheses: usize,
+}
+
+#[pymethods]
+impl PyLine {
+    /// (3,) a point on the line (the mean of the inliers).
+    #[getter]
+    fn point<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        to_numpy(py, Ix1(3), self.line.point.coords.as_slice().to_vec())
+    }
+    /// (3,) unit direction (its sign is arbitrary).
+    #[getter]
+    fn direction<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        to_numpy(py, Ix1(3), self.line.direction.as_slice().to_vec())
+    }
+    /// int64 indices of the inlier points in the input, ascending.
+    #[getter]
+    fn inliers<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        indices_to_numpy(py, &self.inliers)
+    }
+    /// Root-mean-square distance of the inliers to the line.
+    #[getter]
+    fn rms(&self) -> f64 {
+        self.rms
+    }
+    /// Hypotheses drawn by RANSAC.
+    #[getter]
+    fn hypotheses(&self) -> usize {
+        self.hypotheses
+    }
+    fn __repr__(&self) -> String {
+        let (p, d) = (self.line.point, self.line.direction);
+        format!(
+            "Line(point=[{:.4}, {:.4}, {:.4}], direction=[{:.6}, {:.6}, {:.6}], inliers={}, rms={:.4})",
+            p.x,
+            p.y,
+            p.z,
+            d.x,
+            d.y,
+            d.z,
+            self.inliers.len(),
+            self.rms
+        )
+    }
+}
+
+fn options(threshold: f64, confidence: f64, max_iterations: usize, seed: u64) -> RansacOptions {
+    RansacOptions {
+        confidence,
+        max_iterations,
+        seed,
+        ..RansacOptions::new(threshold)
+    }
+}
+
+/// The plane with the most support among `points`, by RANSAC with MSAC scoring, local
+/// optimisation and a final least-squares refit on its inliers.
+///
+/// points: (N, 3) or (N, 4) array (float32 or float64), N >= 3.
+/// distance_threshold: inlier distance in metres (> 0).
+/// confidence: stop once an all-inlier sample was drawn with this probability.
+/// max_iterations: cap on hypotheses. seed: the sampler's seed (same seed, same answer, any
+/// thread count).
+#[pyfunction]
+#[pyo3(signature = (points, distance_threshold, *, confidence=0.999, max_iterations=10_000, seed=0))]
+fn ransac_plane(
+    py: Python<'_>,
+    points: &Bound<'_, PyAny>,
+    distance_threshold: f64,
+    confidence: f64,
+    max_iterations: usize,
+    seed: u64,
+) -> PyResult<PyPlane> {
+    let points = arrays::points(points, "points")?;
+    let opts = options(distance_threshold, confidence, max_iterations, seed);
+    let r = run(py, move || rs_ransac_plane(&points, &opts))?;
+    Ok(PyPlane {
+        plane: r.model,
+        inliers: r.inliers,
+        rms: r.rms,
+        hypotheses: r.hypotheses,
+    })
+}
+
+/// The line with the most support among `points`, by RANSAC (see `ransac_plane`). N >= 2.
+#[pyfunction]
+#[pyo3(signature = (points, distance_threshold, *, confidence=0.999, max_iterations=10_000, seed=0))]
+fn ransac_line(
+    py: Python<'_>,
+    points: &Bound<'_, PyAny>,
+    distance_threshold: f64,
+    confidence: f64,
+    max_iterations: usize,
+    seed: u64,
+) -> PyResult<PyLine> {
+    let points = arrays::points(points, "points")?;
+    let opts = options(distance_threshold, confidence, max_iterations, seed);
+    let r = run(py, move || rs_ransac_line(&points, &opts))?;
+    Ok(PyLine {
+        line: r.model,
+        inliers: r.inliers,
+        rms: r.rms,
+        hypotheses: r.hypotheses,
+    })
+}
+
+/// `count` planes, largest first: sequential RANSAC (inliers removed after each plane), then a
+/// joint refinement that gives every point to the only plane within the threshold (points near
+/// two planes, at the intersection lines, are dropped) and refits.
+///
+/// Raises CalibrationError when fewer than `count` planes with at least `min_inliers` inliers exist.
+#[pyfunction]
+#[pyo3(signature = (points, count=3, distance_threshold=0.05, *, min_inliers=50, refinement_rounds=3, confidence=0.999, max_iterations=10_000, seed=0))]
+#[allow(clippy::too_many_arguments)]
+fn extract_planes(
+    py: Python<'_>,
+    points: &Bound<'_, PyAny>,
+    count: usize,
+    distance_threshold: f64,
+    min_inliers: usize,
+    refinement_rounds: usize,
+    confidence: f64,
+    max_iterations: usize,
+    seed: u64,
+) -> PyResult<Vec<PyPlane>> {
+    let points = arrays::points(points, "points")?;
+    let opts = ExtractOptions {
+        count,
+        min_inliers,
+        refinement_rounds,
+        ransac: options(distance_threshold, confidence, max_iterations, seed),
+    };
+    let found = run(py, move || rs_extract_planes(&points, &opts))?;
+    Ok(found
+        .into_iter()
+        .map(|p| PyPlane {
+            plane: p.plane,
+            inliers: p.inliers,
+            rms: p.rms,
+            hypotheses: p.hypotheses,
+        })
+        .collect())
+}
+
+fn scores_to_numpy<'py>(
+    py: Python<'py>,
+    scores: &[Score],
+) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<i64>>) {
+    (
+        PyArray1::from_iter(py, scores.iter().map(|s| s.cost)),
+        PyArray1::from_iter(py, scores.iter().map(|s| s.inliers as i64)),
+    )
+}
+
+/// MSAC costs sum(min(d^2, t^2)) and inlier counts (d < t) of the given planes (K, 4), as the
+/// RANSAC search computes them (f32, centred on the cloud's bounding-box midpoint).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn score_planes<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    planes: &Bound<'py, PyAny>,
+    distance_threshold: f64,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<i64>>)> {
+    let points = arrays::points(points, "points")?;
+    let planes = arrays::rows(planes, "planes", 4)?
+        .iter()
+        .map(|c| Plane::from_coefficients(&Vector4::from_column_slice(c)))
+        .collect::<crate::Result<Vec<_>>>()?;
+    let opts = RansacOptions::new(distance_threshold);
+    opts.validate()?;
+    let scores = run(py, move || {
+        let cloud = Cloud::new(&points)?;
+        Ok(score_models(
+            &PlaneEstimator,
+            &cloud,
+            &planes,
+            distance_threshold,
+            true,
+        ))
+    })?;
+    Ok(scores_to_numpy(py, &scores))
+}
+
+/// MSAC costs and inlier counts of the given lines (K, 6) [px, py, pz, dx, dy, dz].
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn score_lines<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    lines: &Bound<'py, PyAny>,
+    distance_threshold: f64,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<i64>>)> {
+    let points = arrays::points(points, "points")?;
+    let lines = arrays::rows(lines, "lines", 6)?
+        .iter()
+        .map(|r| {
+            Line::new(
+                Point3::new(r[0], r[1], r[2]),
+                Vector3::new(r[3], r[4], r[5]),
+            )
+        })
+        .collect::<crate::Result<Vec<_>>>()?;
+    RansacOptions::new(distance_threshold).validate()?;
+    let scores = run(py, move || {
+        let cloud = Cloud::new(&points)?;
+        Ok(score_models(
+            &LineEstimator,
+            &cloud,
+            &lines,
+            distance_threshold,
+            true,
+        ))
+    })?;
+    Ok(scores_to_numpy(py, &scores))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyPlane>()?;
+    m.add_class::<PyLine>()?;
+    m.add_function(wrap_pyfunction!(ransac_plane, m)?)?;
+    m.add_function(wrap_pyfunction!(ransac_line, m)?)?;
+    m.add_function(wrap_pyfunction!(extract_planes, m)?)?;
+    m.add_function(wrap_pyfunction!(score_planes, m)?)?;
+    m.add_function(wrap_pyfunction!(score_lines, m)?)?;
+    Ok(())
+}
