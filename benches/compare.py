@@ -118,14 +118,14 @@ def main() -> None:
     for n in ARGS.sizes:
         print(compare_size(n))
 
-    # Raw scoring throughput: 64 hypotheses over 1M points, per core.
+    # Raw scoring throughput: 256 hypotheses over 1M points, per core.
     points, truth = ref.corner_cloud(np.random.default_rng(1), 266_667, 200_000, 0.03)
     rng = np.random.default_rng(2)
-    hyps = np.vstack([truth + rng.normal(0, 0.05, truth.shape) for _ in range(22)])[:64]
+    hyps = np.vstack([truth + rng.normal(0, 0.05, truth.shape) for _ in range(86)])[:256]
     t, _ = median_time(lambda: _lidarcal.score_planes(points, hyps, ARGS.threshold), 5)
     rate = len(hyps) * len(points) / t
     print(
-        f"\nscoring throughput (score_planes, 64 planes x {len(points):,} points, inlier counts on,"
+        f"\nscoring throughput (score_planes, 256 planes x {len(points):,} points, inlier counts on,"
         f" including the f32 copy): {rate:.3g} point-tests/s = {rate / ARGS.threads:.3g} per core"
     )
 

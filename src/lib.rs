@@ -56,6 +56,7 @@
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 
+pub mod calib;
 pub mod error;
 pub mod fit;
 pub mod geometry;

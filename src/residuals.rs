@@ -42,9 +42,12 @@
 //! assert!((solution.pose.to_homogeneous() - ref_from_tgt.to_homogeneous()).amax() < 1e-9);
 //! ```
 
-use nalgebra::{Isometry3, Point3, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3, Vector6};
+
+use crate::geometry::hat;
 
 use crate::error::{ensure_finite, Error, Result};
+use crate::fit::Moments;
 use crate::geometry::{orthonormal_basis, Line, Plane};
 use crate::lm::{accumulate, LeastSquaresProblem, Loss, NormalEquations};
 
@@ -339,6 +342,144 @@ impl LeastSquaresProblem for PointToLine {
     }
 }
 
+/// Points of one plane group summarised by their [`Moments`] (count, mean, scatter).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneMomentGroup {
+    /// The plane, in the frame opposite to `frame`.
+    pub plane: Plane,
+    /// Moments of the group's points, in `frame`.
+    pub moments: Moments,
+    /// The frame of the points.
+    pub frame: Frame,
+}
+
+/// Point-to-plane alignment with the least-squares loss, evaluated from per-group sufficient
+/// statistics: an evaluation costs O(groups), not O(points).
+///
+/// It is exact, not an approximation: a residual `r = n . q + d` and its Jacobian row
+/// `[n, q x n]` are affine in the point `q`, so `sum r^2`, `sum r J` and `sum J J^T` are
+/// polynomials of degree two in the points and depend on them only through the count, the sum and
+/// the sum of outer products. (A robust loss reweights each point and needs [`PointToPlane`].)
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneMomentsProblem {
+    groups: Vec<PlaneMomentGroup>,
+    count: usize,
+}
+
+impl PlaneMomentsProblem {
+    /// Builds the problem; fails when there is no group or a group has no points.
+    pub fn new(groups: Vec<PlaneMomentGroup>) -> Result<Self> {
+        if groups.is_empty() {
+            return Err(Error::InvalidInput("no plane groups given".into()));
+        }
+        if let Some(i) = groups.iter().position(|g| g.moments.count() == 0) {
+            return Err(Error::InvalidInput(format!(
+                "plane group {i} has no points"
+            )));
+        }
+        let count = groups.iter().map(|g| g.moments.count()).sum();
+        Ok(PlaneMomentsProblem { groups, count })
+    }
+
+    /// Root-mean-square residual of each group at `pose`.
+    pub fn group_rms(&self, pose: &Isometry3<f64>) -> Vec<f64> {
+        self.groups
+            .iter()
+            .map(|g| {
+                let stats = GroupStats::new(g, pose);
+                (stats.sum_r2 / stats.n).sqrt()
+            })
+            .collect()
+    }
+}
+
+/// One group's statistics in the residual frame: residual `r = n . q + d` over points `q` with
+/// count `n`, sum `sigma` and second moment `second` (sum q q^T), plus the Jacobian's sign.
+struct GroupStats {
+    n: f64,
+    normal: Vector3<f64>,
+    offset: f64,
+    sigma: Vector3<f64>,
+    second: Matrix3<f64>,
+    sum_r2: f64,
+    /// +1 for target points (J = [n, q x n]); -1 for reference points (J = [-m, m x p]).
+    sign: f64,
+}
+
+impl GroupStats {
+    fn new(g: &PlaneMomentGroup, pose: &Isometry3<f64>) -> Self {
+        let n = g.moments.count() as f64;
+        let mean = g.moments.mean().coords;
+        let scatter = g.moments.scatter();
+        let (normal, offset, mean_q, scatter_q, sign) = match g.frame {
+            Frame::Target => {
+                // q = T p: the mean moves, the scatter rotates.
+                let r = pose.rotation.to_rotation_matrix().into_inner();
+                let mean_q = (pose * Point3::from(mean)).coords;
+                (
+                    g.plane.normal.into_inner(),
+                    g.plane.offset,
+                    mean_q,
+                    r * scatter * r.transpose(),
+                    1.0,
+                )
+            }
+            Frame::Reference => {
+                let plane = g.plane.transformed(pose);
+                (plane.normal.into_inner(), plane.offset, mean, scatter, -1.0)
+            }
+        };
+        let second = scatter_q + mean_q * mean_q.transpose() * n;
+        let mean_r = normal.dot(&mean_q) + offset;
+        let sum_r2 = (normal.transpose() * scatter_q * normal)[0] + n * mean_r * mean_r;
+        GroupStats {
+            n,
+            normal,
+            offset,
+            sigma: mean_q * n,
+            second,
+            sum_r2: sum_r2.max(0.0),
+            sign,
+        }
+    }
+}
+
+impl LeastSquaresProblem for PlaneMomentsProblem {
+    fn residual_count(&self) -> usize {
+        self.count
+    }
+
+    fn normal_equations(&self, pose: &Isometry3<f64>, with_derivatives: bool) -> NormalEquations {
+        let mut ne = NormalEquations::default();
+        for g in &self.groups {
+            let s = GroupStats::new(g, pose);
+            ne.cost += 0.5 * s.sum_r2;
+            ne.residual_count += g.moments.count();
+            if !with_derivatives {
+                continue;
+            }
+            // Rows: J = [sign * n, w] with w = q x n (target) or n x q (reference) = -sign * [n]x q.
+            let k = hat(&s.normal) * (-s.sign);
+            let sum_r = s.normal.dot(&s.sigma) + s.n * s.offset;
+            let sum_rq = s.second * s.normal + s.sigma * s.offset;
+            let top_left = s.normal * s.normal.transpose() * s.n;
+            let top_right = s.normal * (k * s.sigma).transpose() * s.sign;
+            let bottom_right = k * s.second * k.transpose();
+            let mut h = nalgebra::Matrix6::zeros();
+            h.fixed_view_mut::<3, 3>(0, 0).copy_from(&top_left);
+            h.fixed_view_mut::<3, 3>(0, 3).copy_from(&top_right);
+            h.fixed_view_mut::<3, 3>(3, 0)
+                .copy_from(&top_right.transpose());
+            h.fixed_view_mut::<3, 3>(3, 3).copy_from(&bottom_right);
+            ne.hessian += h;
+            let top = s.normal * (sum_r * s.sign);
+            let bottom = k * sum_rq;
+            ne.gradient += Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
+        }
+        ne
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -551,6 +692,67 @@ mod tests {
         assert!((sol.pose.to_homogeneous() - truth.to_homogeneous()).amax() < 1e-9);
         assert!(sol.report.final_cost < 1e-18);
         assert!(sol.report.initial_cost > 1.0);
+    }
+
+    #[test]
+    fn moments_problem_is_exact() {
+        let plane = Plane::new(Vector3::new(0.3, -0.5, 0.8), 1.7).unwrap();
+        let other = Plane::new(Vector3::new(-0.6, 0.1, 0.2), -4.0).unwrap();
+        let groups = vec![
+            PlaneGroup {
+                plane,
+                points: sample_points(21, 3000),
+                frame: Frame::Target,
+            },
+            PlaneGroup {
+                plane: other,
+                points: sample_points(22, 700)
+                    .iter()
+                    .map(|p| p + Vector3::new(40.0, -25.0, 3.0))
+                    .collect(),
+                frame: Frame::Reference,
+            },
+        ];
+        let pointwise = PointToPlane::new(groups.clone(), Loss::Squared).unwrap();
+        let moments = PlaneMomentsProblem::new(
+            groups
+                .iter()
+                .map(|g| PlaneMomentGroup {
+                    plane: g.plane,
+                    moments: Moments::from_points(&g.points),
+                    frame: g.frame,
+                })
+                .collect(),
+        )
+        .unwrap();
+        for pose in [pose(), Isometry3::identity(), pose().inverse()] {
+            let mut a = pointwise.normal_equations(&pose, true);
+            a.symmetrize();
+            let b = moments.normal_equations(&pose, true);
+            assert!(
+                (a.cost - b.cost).abs() < 1e-10 * a.cost,
+                "{} {}",
+                a.cost,
+                b.cost
+            );
+            assert!((a.gradient - b.gradient).amax() < 1e-10 * a.gradient.amax());
+            assert!((a.hessian - b.hessian).amax() < 1e-10 * a.hessian.amax());
+            assert_eq!(a.residual_count, b.residual_count);
+            let c = moments.normal_equations(&pose, false);
+            assert!((c.cost - a.cost).abs() < 1e-10 * a.cost);
+        }
+        let rms = moments.group_rms(&pose());
+        let direct: Vec<f64> = groups
+            .iter()
+            .map(|g| {
+                let single = PointToPlane::new(vec![g.clone()], Loss::Squared).unwrap();
+                let r = single.residuals(&pose());
+                (r.iter().map(|(r, _)| r * r).sum::<f64>() / r.len() as f64).sqrt()
+            })
+            .collect();
+        for (a, b) in rms.iter().zip(&direct) {
+            assert!((a - b).abs() < 1e-9 * b);
+        }
     }
 
     #[test]

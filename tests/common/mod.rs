@@ -118,3 +118,41 @@ pub fn corner_cloud(
 pub fn normal_error_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.dot(b).abs().min(1.0).acos().to_degrees()
 }
+
+/// The same wall corner seen by two sensors: independent samples of `corner_cloud`, the second
+/// expressed in the target frame of `reference_from_target`.
+pub fn two_sensor_corner(
+    reference_from_target: &Isometry3<f64>,
+    n_per_plane: usize,
+    clutter: usize,
+    sigma: f64,
+    seed: u64,
+) -> (Vec<Point3<f64>>, Vec<Point3<f64>>) {
+    let (reference, _) = corner_cloud(n_per_plane, clutter, sigma, seed);
+    let (in_reference, _) = corner_cloud(n_per_plane, clutter, sigma, seed + 1000);
+    let target_from_reference = reference_from_target.inverse();
+    let target = in_reference
+        .iter()
+        .map(|p| target_from_reference * p)
+        .collect();
+    (reference, target)
+}
+
+/// Rotation (rad) and translation (m) errors of `estimate` against `truth`.
+pub fn pose_errors(truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> (f64, f64) {
+    let r = (truth.rotation * estimate.rotation.inverse()).angle();
+    let t = (truth.translation.vector - estimate.translation.vector).norm();
+    (r, t)
+}
+
+/// A pose from roll, pitch, yaw (degrees) and a translation (metres).
+pub fn pose_rpy_deg(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        nalgebra::Translation3::new(t[0], t[1], t[2]),
+        nalgebra::UnitQuaternion::from_euler_angles(
+            roll.to_radians(),
+            pitch.to_radians(),
+            yaw.to_radians(),
+        ),
+    )
+}

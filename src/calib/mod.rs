@@ -1,0 +1,49 @@
+//! Calibration methods: they take the two sensors' clouds and return `reference_from_target`.
+//!
+//! * [`planes`]: three planar surfaces of a wall corner seen by both sensors (Jiao et al., 2019),
+//!   without an initial guess and for any mounting orientation.
+
+pub mod planes;
+
+use std::time::Instant;
+
+/// Wall-clock time of each pipeline stage, in milliseconds.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Timings {
+    /// `(stage, milliseconds)` in pipeline order.
+    pub stages: Vec<(&'static str, f64)>,
+}
+
+impl Timings {
+    /// Total of all stages.
+    pub fn total(&self) -> f64 {
+        self.stages.iter().map(|(_, ms)| ms).sum()
+    }
+}
+
+/// Records consecutive stage durations.
+pub(crate) struct Stopwatch {
+    last: Instant,
+    timings: Timings,
+}
+
+impl Stopwatch {
+    pub(crate) fn start() -> Self {
+        Stopwatch {
+            last: Instant::now(),
+            timings: Timings::default(),
+        }
+    }
+
+    /// Closes the current stage under `name`.
+    pub(crate) fn lap(&mut self, name: &'static str) {
+        let now = Instant::now();
+        let ms = now.duration_since(self.last).as_secs_f64() * 1e3;
+        self.timings.stages.push((name, ms));
+        self.last = now;
+    }
+
+    pub(crate) fn finish(self) -> Timings {
+        self.timings
+    }
+}

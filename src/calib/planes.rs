@@ -1,0 +1,472 @@
+//! Calibration from three planar surfaces (a wall corner), after Jiao et al., "A Novel Dual-Lidar
+//! Calibration Algorithm Using Planar Surfaces" (IEEE IV 2019), with the errata of that text fixed.
+//!
+//! # Pipeline
+//! 1. **Threshold.** Unless given, each cloud's inlier distance is `3 sigma` of its own noise,
+//!    clamped to `[1 cm, 50 cm]`. `sigma` comes from the point-to-plane residuals of the cloud's
+//!    largest plane (found with a 25 cm threshold): three times, the plane is refitted by least
+//!    squares on the points within the current threshold, and the first quartile of their `|r|`,
+//!    divided by 0.3186 (its value for a unit Gaussian), gives `sigma` and the next threshold. A low quantile is used because the band around a plane also holds clutter and the
+//!    neighbouring planes' points near the intersection lines, which inflate a median.
+//! 2. **Planes.** [`extract_planes`] finds three planes per cloud (sequential RANSAC, then the
+//!    joint reassignment that removes the sequential method's tilt near intersection lines). Each
+//!    normal is oriented toward its sensor.
+//! 3. **Conditioning.** The three normals must be linearly independent: the smallest singular value
+//!    of the matrix of normals must be at least [`MIN_NORMAL_SINGULAR_VALUE`] (planes within about
+//!    16 degrees of parallel are refused).
+//! 4. **Corner.** The intersection point `o` solves `N o = -d` (the seed's eq. 3).
+//! 5. **Correspondence.** Each cloud's planes are put in right-handed order
+//!    (`(n_1 x n_2) . n_3 > 0`). With normals oriented toward the sensors, a correspondence must
+//!    keep that handedness, so only the 3 cyclic shifts remain. Each is scored by the RMS
+//!    misalignment of the normals after Kabsch; the best wins. No "most vertical normal is the
+//!    floor" rule is used, so any mounting works. When the second best scores within
+//!    [`AMBIGUITY_RMS`] (a corner whose three angles are nearly equal, e.g. a cube corner), the
+//!    optional gravity directions `up` break the tie; without them the calibration is refused.
+//! 6. **Initial transform.** `R` by Kabsch on the matched **unit normals** (not `n - o`, which
+//!    mixes translation into rotation), `t = o_ref - R o_tgt` (not `o' - o`).
+//! 7. **Refinement.** Levenberg–Marquardt over the symmetric point-to-plane cost: target inliers
+//!    against reference planes plus reference inliers against target planes, an ordinary sum of
+//!    squares (the seed's eq. 8 squares a sum of squares). With the least-squares loss it runs on
+//!    per-plane sufficient statistics ([`PlaneMomentsProblem`], exact); a robust loss uses the points.
+//! 8. **Check.** If a plane's RMS residual after refinement exceeds twice its threshold, the two
+//!    clouds do not agree and the result is refused.
+
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
+
+use super::{Stopwatch, Timings};
+use crate::error::{ensure_finite, Error, Result};
+use crate::fit::Moments;
+use crate::geometry::Plane;
+use crate::kabsch::kabsch;
+use crate::lm::{solve, LmOptions, LmReport, Loss};
+use crate::ransac::plane::{extract_planes, ransac_plane, ExtractOptions, ExtractedPlane};
+use crate::ransac::RansacOptions;
+use crate::residuals::{Frame, PlaneGroup, PlaneMomentGroup, PlaneMomentsProblem, PointToPlane};
+
+/// Smallest accepted singular value of the 3x3 matrix of plane normals.
+pub const MIN_NORMAL_SINGULAR_VALUE: f64 = 0.2;
+/// Orderings whose RMS normal misalignment (radians) is within this of each other are ambiguous
+/// (0.5 degrees).
+pub const AMBIGUITY_RMS: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// A gravity tie-break must separate the candidates' up-vector errors by at least this (radians,
+/// 10 degrees).
+pub const UP_TIE_BREAK_MARGIN: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// Threshold used to find the largest plane when estimating the noise (metres).
+pub const COARSE_THRESHOLD: f64 = 0.25;
+/// First quartile of `|x|` for a standard normal `x`: the noise estimate divides by it.
+pub const GAUSSIAN_ABS_QUARTILE: f64 = 0.318_639_363_964_375;
+/// Bounds of an estimated threshold (metres).
+pub const THRESHOLD_RANGE: (f64, f64) = (0.01, 0.5);
+
+/// Options of [`calibrate_planes`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarOptions {
+    /// Inlier distance for plane extraction in metres, or `None` to estimate it per cloud.
+    pub distance_threshold: Option<f64>,
+    /// Seed of the RANSAC sampler.
+    pub seed: u64,
+    /// Gravity direction ("up") in the reference and in the target frame, used only to break a
+    /// tie between plane orderings.
+    pub up: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// Run the Levenberg–Marquardt refinement (otherwise return the closed-form result).
+    pub refine: bool,
+    /// Loss of the refinement.
+    pub loss: Loss,
+    /// Fewest inliers a plane needs.
+    pub min_inliers: usize,
+    /// Levenberg–Marquardt options.
+    pub lm: LmOptions,
+}
+
+impl Default for PlanarOptions {
+    fn default() -> Self {
+        PlanarOptions {
+            distance_threshold: None,
+            seed: 0,
+            up: None,
+            refine: true,
+            loss: Loss::Squared,
+            min_inliers: 50,
+            lm: LmOptions::default(),
+        }
+    }
+}
+
+/// How the planes of the two clouds were matched.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ordering {
+    /// RMS normal misalignment (radians, chord) after Kabsch of each cyclic shift `k`
+    /// (reference plane `i` matched to right-handed target plane `(i + k) mod 3`).
+    pub scores: [f64; 3],
+    /// The shift used.
+    pub chosen: usize,
+    /// Score of the runner-up minus the chosen one's.
+    pub margin: f64,
+    /// The geometry alone could not decide (`margin` below [`AMBIGUITY_RMS`]); the gravity
+    /// tie-break decided.
+    pub used_up: bool,
+}
+
+/// Result of [`calibrate_planes`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanarCalibration {
+    /// The calibrated `reference_from_target`.
+    pub reference_from_target: Isometry3<f64>,
+    /// The closed-form estimate (Kabsch + corner translation) before refinement.
+    pub initial_reference_from_target: Isometry3<f64>,
+    /// Matched planes, reference frame (row `i` matches `planes_target[i]`).
+    pub planes_reference: [Plane; 3],
+    /// Matched planes, target frame.
+    pub planes_target: [Plane; 3],
+    /// Inlier indices into the reference cloud, per matched plane.
+    pub inliers_reference: [Vec<usize>; 3],
+    /// Inlier indices into the target cloud, per matched plane.
+    pub inliers_target: [Vec<usize>; 3],
+    /// The corner (intersection of the three planes) in each frame.
+    pub corners: [Point3<f64>; 2],
+    /// RMS point-to-plane residual per matched plane at the result (both clouds together).
+    pub rmse: [f64; 3],
+    /// The plane correspondence.
+    pub ordering: Ordering,
+    /// Inlier thresholds used for the reference and the target cloud.
+    pub distance_thresholds: [f64; 2],
+    /// The refinement's report (`None` when `refine` was off).
+    pub report: Option<LmReport>,
+    /// Covariance of the left-perturbation tangent `[rho; phi]` of the result (least-squares loss).
+    pub covariance: Option<Matrix6<f64>>,
+    /// Stage timings.
+    pub timings: Timings,
+}
+
+/// Estimates a cloud's inlier threshold as described in the module docs.
+pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
+    let mut options = RansacOptions::new(COARSE_THRESHOLD);
+    options.seed = seed;
+    let mut plane = ransac_plane(points, &options)?.model;
+    let mut threshold = COARSE_THRESHOLD;
+    for _ in 0..3 {
+        // Refit on the current band first: a plane found with a wide band is tilted by the
+        // neighbouring planes' points, and its residuals would overstate the noise.
+        let band = Moments::from_points(
+            points
+                .iter()
+                .filter(|p| plane.signed_distance(p).abs() < threshold),
+        );
+        if let Ok(fit) = band.plane() {
+            plane = fit.plane;
+        }
+        let mut residuals: Vec<f64> = points
+            .iter()
+            .map(|p| plane.signed_distance(p).abs())
+            .filter(|r| *r < threshold)
+            .collect();
+        if residuals.len() < 3 {
+            break;
+        }
+        let q = residuals.len() / 4;
+        let (_, quartile, _) = residuals.select_nth_unstable_by(q, |a, b| a.total_cmp(b));
+        let sigma = *quartile / GAUSSIAN_ABS_QUARTILE;
+        threshold = (3.0 * sigma).clamp(THRESHOLD_RANGE.0, THRESHOLD_RANGE.1);
+    }
+    Ok(threshold)
+}
+
+fn normals(planes: &[Plane; 3]) -> [Vector3<f64>; 3] {
+    planes.map(|p| p.normal.into_inner())
+}
+
+fn check_conditioning(planes: &[Plane; 3], which: &str) -> Result<()> {
+    let [a, b, c] = normals(planes);
+    let m = Matrix3::from_columns(&[a, b, c]);
+    let smallest = m.singular_values().min();
+    if smallest < MIN_NORMAL_SINGULAR_VALUE {
+        let angle =
+            |u: &Vector3<f64>, v: &Vector3<f64>| u.dot(v).abs().min(1.0).acos().to_degrees();
+        let closest = angle(&a, &b).min(angle(&a, &c)).min(angle(&b, &c));
+        return Err(Error::Calibration(format!(
+            "the three planes of the {which} cloud are not linearly independent: smallest singular \
+             value of the normals {smallest:.3} < {MIN_NORMAL_SINGULAR_VALUE} (two planes are \
+             {closest:.1} deg from parallel, or all three share a direction)"
+        )));
+    }
+    Ok(())
+}
+
+/// The point where three planes meet.
+fn corner(planes: &[Plane; 3]) -> Result<Point3<f64>> {
+    let [a, b, c] = normals(planes);
+    let m = Matrix3::from_rows(&[a.transpose(), b.transpose(), c.transpose()]);
+    let rhs = Vector3::new(-planes[0].offset, -planes[1].offset, -planes[2].offset);
+    m.lu()
+        .solve(&rhs)
+        .map(Point3::from)
+        .ok_or_else(|| Error::Calibration("the three planes do not meet in a point".into()))
+}
+
+/// Puts three planes (with their inliers) in right-handed order: `(n0 x n1) . n2 > 0`.
+fn right_handed(mut planes: Vec<ExtractedPlane>) -> Vec<ExtractedPlane> {
+    if planes.len() == 3 {
+        let (a, b, c) = (
+            planes[0].plane.normal,
+            planes[1].plane.normal,
+            planes[2].plane.normal,
+        );
+        if a.cross(&b).dot(&c) < 0.0 {
+            planes.swap(1, 2);
+        }
+    }
+    planes
+}
+
+fn to_array<T: Clone>(v: &[T]) -> Result<[T; 3]> {
+    match v {
+        [a, b, c] => Ok([a.clone(), b.clone(), c.clone()]),
+        _ => Err(Error::Calibration(format!(
+            "expected 3 planes, got {}",
+            v.len()
+        ))),
+    }
+}
+
+fn isometry(rotation: &nalgebra::Rotation3<f64>, t: Vector3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_rotation_matrix(rotation),
+    )
+}
+
+fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
+    if points.len() < 9 {
+        return Err(Error::InvalidInput(format!(
+            "the {which} cloud has {} points; three planes need at least 9",
+            points.len()
+        )));
+    }
+    ensure_finite(which, points.iter().flat_map(|p| p.coords.iter()))
+}
+
+/// Matches the planes and returns the chosen cyclic shift with its rotation.
+fn match_planes(
+    reference: &[Plane; 3],
+    target: &[Plane; 3],
+    up: Option<(Vector3<f64>, Vector3<f64>)>,
+) -> Result<(Ordering, nalgebra::Rotation3<f64>)> {
+    let a = normals(reference);
+    let b = normals(target);
+    let mut rotations = Vec::with_capacity(3);
+    let mut scores = [0.0; 3];
+    for (k, score) in scores.iter_mut().enumerate() {
+        let shifted = [b[k % 3], b[(k + 1) % 3], b[(k + 2) % 3]];
+        let solution = kabsch(&a, &shifted, None)?;
+        *score = (solution.residual / 3.0).sqrt();
+        rotations.push(solution.rotation);
+    }
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| scores[i].total_cmp(&scores[j]));
+    let margin = scores[order[1]] - scores[order[0]];
+    let mut chosen = order[0];
+    let mut used_up = false;
+    if margin < AMBIGUITY_RMS {
+        let Some((up_ref, up_tgt)) = up else {
+            return Err(Error::Calibration(format!(
+                "ambiguous plane correspondence: two orderings fit the normals equally well \
+                 (RMS misalignment {:.3} and {:.3} deg; the corner's angles are nearly equal, \
+                 as in a cube corner); pass `up`, the gravity direction in each sensor's frame, \
+                 to break the tie",
+                scores[order[0]].to_degrees(),
+                scores[order[1]].to_degrees()
+            )));
+        };
+        if up_ref.norm() == 0.0 || up_tgt.norm() == 0.0 {
+            return Err(Error::InvalidInput("up vectors must be non-zero".into()));
+        }
+        let candidates: Vec<usize> = order
+            .iter()
+            .copied()
+            .filter(|&k| scores[k] - scores[order[0]] < AMBIGUITY_RMS)
+            .collect();
+        let up_error = |k: usize| {
+            let mapped = rotations[k] * up_tgt.normalize();
+            mapped.dot(&up_ref.normalize()).clamp(-1.0, 1.0).acos()
+        };
+        let mut by_up = candidates.clone();
+        by_up.sort_by(|&i, &j| up_error(i).total_cmp(&up_error(j)));
+        if by_up.len() > 1 && up_error(by_up[1]) - up_error(by_up[0]) < UP_TIE_BREAK_MARGIN {
+            return Err(Error::Calibration(format!(
+                "ambiguous plane correspondence, and `up` does not break the tie (up errors \
+                 {:.1} and {:.1} deg)",
+                up_error(by_up[0]).to_degrees(),
+                up_error(by_up[1]).to_degrees()
+            )));
+        }
+        chosen = by_up[0];
+        used_up = true;
+    }
+    let rotation = rotations[chosen];
+    Ok((
+        Ordering {
+            scores,
+            chosen,
+            margin,
+            used_up,
+        },
+        rotation,
+    ))
+}
+
+/// Calibrates `reference_from_target` from a wall corner seen by both sensors (see the module docs).
+///
+/// Errors: [`Error::InvalidInput`] for malformed input; [`Error::Calibration`] when three planes
+/// with enough inliers are not found in a cloud, the planes are not linearly independent, the
+/// correspondence is ambiguous without a tie-break, or the refined planes do not agree.
+pub fn calibrate_planes(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    options: &PlanarOptions,
+) -> Result<PlanarCalibration> {
+    check_cloud(reference, "reference")?;
+    check_cloud(target, "target")?;
+    options.loss.validate()?;
+    let mut clock = Stopwatch::start();
+
+    let thresholds = match options.distance_threshold {
+        Some(t) => {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(Error::InvalidInput(format!(
+                    "distance_threshold must be finite and positive, got {t}"
+                )));
+            }
+            [t, t]
+        }
+        None => [
+            estimate_threshold(reference, options.seed)?,
+            estimate_threshold(target, options.seed)?,
+        ],
+    };
+    clock.lap("threshold");
+
+    let extract = |points: &[Point3<f64>], threshold: f64, which: &str| {
+        let mut o = ExtractOptions::new(3, threshold);
+        o.min_inliers = options.min_inliers;
+        o.ransac.seed = options.seed;
+        extract_planes(points, &o).map_err(|e| match e {
+            Error::Calibration(m) => Error::Calibration(format!("{which} cloud: {m}")),
+            Error::Degenerate(m) => Error::Calibration(format!("{which} cloud: {m}")),
+            other => other,
+        })
+    };
+    let found_ref = right_handed(extract(reference, thresholds[0], "reference")?);
+    clock.lap("planes_reference");
+    let found_tgt = right_handed(extract(target, thresholds[1], "target")?);
+    clock.lap("planes_target");
+
+    let planes_ref = to_array(&found_ref.iter().map(|p| p.plane).collect::<Vec<_>>())?;
+    let planes_tgt_rh = to_array(&found_tgt.iter().map(|p| p.plane).collect::<Vec<_>>())?;
+    check_conditioning(&planes_ref, "reference")?;
+    check_conditioning(&planes_tgt_rh, "target")?;
+    let (ordering, rotation) = match_planes(&planes_ref, &planes_tgt_rh, options.up)?;
+    let k = ordering.chosen;
+    let matched_tgt: Vec<&ExtractedPlane> = (0..3).map(|i| &found_tgt[(i + k) % 3]).collect();
+    let planes_tgt = [
+        matched_tgt[0].plane,
+        matched_tgt[1].plane,
+        matched_tgt[2].plane,
+    ];
+    clock.lap("match");
+
+    let corner_ref = corner(&planes_ref)?;
+    let corner_tgt = corner(&planes_tgt)?;
+    let initial = isometry(&rotation, corner_ref.coords - rotation * corner_tgt.coords);
+    clock.lap("closed_form");
+
+    let inliers_ref: [Vec<usize>; 3] = to_array(
+        &found_ref
+            .iter()
+            .map(|p| p.inliers.clone())
+            .collect::<Vec<_>>(),
+    )?;
+    let inliers_tgt: [Vec<usize>; 3] = to_array(
+        &matched_tgt
+            .iter()
+            .map(|p| p.inliers.clone())
+            .collect::<Vec<_>>(),
+    )?;
+    let select = |points: &[Point3<f64>], idx: &[usize]| -> Vec<Point3<f64>> {
+        idx.iter().filter_map(|&i| points.get(i).copied()).collect()
+    };
+    let mut moment_groups = Vec::with_capacity(6);
+    for i in 0..3 {
+        moment_groups.push(PlaneMomentGroup {
+            plane: planes_ref[i],
+            moments: Moments::from_points(&select(target, &inliers_tgt[i])),
+            frame: Frame::Target,
+        });
+        moment_groups.push(PlaneMomentGroup {
+            plane: planes_tgt[i],
+            moments: Moments::from_points(&select(reference, &inliers_ref[i])),
+            frame: Frame::Reference,
+        });
+    }
+    let moments_problem = PlaneMomentsProblem::new(moment_groups)?;
+
+    let (pose, report) = if options.refine {
+        let solution = match options.loss {
+            Loss::Squared => solve(&moments_problem, &initial, &options.lm)?,
+            loss => {
+                let mut groups = Vec::with_capacity(6);
+                for i in 0..3 {
+                    groups.push(PlaneGroup {
+                        plane: planes_ref[i],
+                        points: select(target, &inliers_tgt[i]),
+                        frame: Frame::Target,
+                    });
+                    groups.push(PlaneGroup {
+                        plane: planes_tgt[i],
+                        points: select(reference, &inliers_ref[i]),
+                        frame: Frame::Reference,
+                    });
+                }
+                solve(&PointToPlane::new(groups, loss)?, &initial, &options.lm)?
+            }
+        };
+        (solution.pose, Some(solution.report))
+    } else {
+        (initial, None)
+    };
+    clock.lap("refine");
+
+    // Per-plane RMS over both directions, and the agreement check.
+    let group_rms = moments_problem.group_rms(&pose);
+    let mut rmse = [0.0; 3];
+    for i in 0..3 {
+        let (n_t, n_r) = (inliers_tgt[i].len() as f64, inliers_ref[i].len() as f64);
+        let (a, b) = (group_rms[2 * i], group_rms[2 * i + 1]);
+        rmse[i] = ((a * a * n_t + b * b * n_r) / (n_t + n_r)).sqrt();
+        let limit = 2.0 * thresholds[0].max(thresholds[1]);
+        if options.refine && rmse[i] > limit {
+            return Err(Error::Calibration(format!(
+                "the matched planes do not agree after refinement: plane {i} has an RMS residual \
+                 of {:.3} m (> {limit:.3} m); the two clouds may not show the same corner",
+                rmse[i]
+            )));
+        }
+    }
+    let covariance = report.as_ref().and_then(|r| r.covariance());
+    clock.lap("check");
+
+    Ok(PlanarCalibration {
+        reference_from_target: pose,
+        initial_reference_from_target: initial,
+        planes_reference: planes_ref,
+        planes_target: planes_tgt,
+        inliers_reference: inliers_ref,
+        inliers_target: inliers_tgt,
+        corners: [corner_ref, corner_tgt],
+        rmse,
+        ordering,
+        distance_thresholds: thresholds,
+        report,
+        covariance,
+        timings: clock.finish(),
+    })
+}
