@@ -3,7 +3,12 @@
 Transforms are 4x4 float64 matrices ``reference_from_target`` (``p_ref = R @ p_tgt + t``);
 point clouds are ``(N, 3)`` or ``(N, 4)`` arrays of float32 or float64.
 
-This release holds the numerical kernels the calibration methods build on:
+Calibration:
+
+* :func:`calibrate_planes` -- from a wall corner (three planes) seen by both sensors, with no
+  initial guess and any mounting; returns a :class:`CalibrationResult`.
+
+The numerical kernels it builds on:
 
 * :func:`kabsch` -- the rotation best aligning two sets of vectors;
 * :func:`so3_exp`, :func:`so3_log`, :func:`se3_exp`, :func:`se3_log` -- the Lie group maps;
@@ -18,10 +23,12 @@ Bad input raises ``ValueError`` naming the problem; a calibration that cannot be
 
 from lidarcal._lidarcal import (
     CalibrationError,
+    CalibrationResult,
     Line,
     Plane,
     RefineResult,
     __version__,
+    calibrate_planes,
     extract_planes,
     kabsch,
     ransac_line,
@@ -36,10 +43,12 @@ from lidarcal._lidarcal import (
 
 __all__ = [
     "CalibrationError",
+    "CalibrationResult",
     "Line",
     "Plane",
     "RefineResult",
     "__version__",
+    "calibrate_planes",
     "extract_planes",
     "kabsch",
     "ransac_line",

@@ -42,6 +42,65 @@ class RefineResult:
     @property
     def covariance(self) -> F64Array | None: ...
 
+class CalibrationResult:
+    """The result of a calibration: ``transform`` maps target points into the reference frame."""
+
+    @property
+    def method(self) -> str: ...
+    @property
+    def transform(self) -> F64Array:
+        """(4, 4) ``reference_from_target``."""
+    @property
+    def initial_transform(self) -> F64Array: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def termination(self) -> str: ...
+    @property
+    def rmse(self) -> F64Array: ...
+    @property
+    def planes_reference(self) -> F64Array: ...
+    @property
+    def planes_target(self) -> F64Array: ...
+    @property
+    def inlier_counts(self) -> I64Array: ...
+    @property
+    def inliers_reference(self) -> list[I64Array]: ...
+    @property
+    def inliers_target(self) -> list[I64Array]: ...
+    @property
+    def ordering_scores(self) -> F64Array: ...
+    @property
+    def ordering_margin(self) -> float: ...
+    @property
+    def used_up(self) -> bool: ...
+    @property
+    def corners(self) -> F64Array: ...
+    @property
+    def distance_thresholds(self) -> F64Array: ...
+    @property
+    def covariance(self) -> F64Array | None: ...
+    @property
+    def timings(self) -> dict[str, float]: ...
+
+def calibrate_planes(
+    reference: ArrayLike,
+    target: ArrayLike,
+    *,
+    distance_threshold: float | None = None,
+    seed: int = 0,
+    up: ArrayLike | None = None,
+    refine: bool = True,
+    loss: LossName = "squared",
+    loss_scale: float = 0.05,
+    min_inliers: int = 50,
+    max_iterations: int = 100,
+) -> CalibrationResult: ...
+
 class Plane:
     """A plane ``normal . p + offset = 0`` found in a point cloud, with its inliers."""
 
@@ -98,6 +157,7 @@ def extract_planes(
     *,
     min_inliers: int = 50,
     refinement_rounds: int = 3,
+    min_angle_deg: float | None = None,
     confidence: float = 0.999,
     max_iterations: int = 10000,
     seed: int = 0,

@@ -9,8 +9,9 @@
 //!    divided by 0.3186 (its value for a unit Gaussian), gives `sigma` and the next threshold. A low quantile is used because the band around a plane also holds clutter and the
 //!    neighbouring planes' points near the intersection lines, which inflate a median.
 //! 2. **Planes.** [`extract_planes`] finds three planes per cloud (sequential RANSAC, then the
-//!    joint reassignment that removes the sequential method's tilt near intersection lines). Each
-//!    normal is oriented toward its sensor.
+//!    joint reassignment that removes the sequential method's tilt near intersection lines),
+//!    discarding any plane within [`MIN_PLANE_ANGLE`] of one already found (real facades come in
+//!    parallel parts). Each normal is oriented toward its sensor.
 //! 3. **Conditioning.** The three normals must be linearly independent: the smallest singular value
 //!    of the matrix of normals must be at least [`MIN_NORMAL_SINGULAR_VALUE`] (planes within about
 //!    16 degrees of parallel are refused).
@@ -45,6 +46,9 @@ use crate::residuals::{Frame, PlaneGroup, PlaneMomentGroup, PlaneMomentsProblem,
 
 /// Smallest accepted singular value of the 3x3 matrix of plane normals.
 pub const MIN_NORMAL_SINGULAR_VALUE: f64 = 0.2;
+/// While extracting, a plane within this angle (radians, 20 degrees) of an accepted one is
+/// discarded and the search continues: the method needs three independent planes.
+pub const MIN_PLANE_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
 /// Orderings whose RMS normal misalignment (radians) is within this of each other are ambiguous
 /// (0.5 degrees).
 pub const AMBIGUITY_RMS: f64 = 0.5 * std::f64::consts::PI / 180.0;
@@ -349,6 +353,7 @@ pub fn calibrate_planes(
         let mut o = ExtractOptions::new(3, threshold);
         o.min_inliers = options.min_inliers;
         o.ransac.seed = options.seed;
+        o.min_angle_between = Some(MIN_PLANE_ANGLE);
         extract_planes(points, &o).map_err(|e| match e {
             Error::Calibration(m) => Error::Calibration(format!("{which} cloud: {m}")),
             Error::Degenerate(m) => Error::Calibration(format!("{which} cloud: {m}")),

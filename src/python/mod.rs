@@ -11,6 +11,7 @@ use pyo3::prelude::*;
 use crate::Error;
 
 mod arrays;
+mod calib;
 mod kernels;
 mod ransac;
 
@@ -62,5 +63,6 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CalibrationError", m.py().get_type::<CalibrationError>())?;
     kernels::register(m)?;
     ransac::register(m)?;
+    calib::register(m)?;
     Ok(())
 }

@@ -190,9 +190,11 @@ fn ransac_line(
 /// joint refinement that gives every point to the only plane within the threshold (points near
 /// two planes, at the intersection lines, are dropped) and refits.
 ///
+/// min_angle_deg: if given, a plane within this angle of an accepted one is discarded (its points
+/// leave the pool) and the search goes on, so the planes found are mutually non-parallel.
 /// Raises CalibrationError when fewer than `count` planes with at least `min_inliers` inliers exist.
 #[pyfunction]
-#[pyo3(signature = (points, count=3, distance_threshold=0.05, *, min_inliers=50, refinement_rounds=3, confidence=0.999, max_iterations=10_000, seed=0))]
+#[pyo3(signature = (points, count=3, distance_threshold=0.05, *, min_inliers=50, refinement_rounds=3, min_angle_deg=None, confidence=0.999, max_iterations=10_000, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn extract_planes(
     py: Python<'_>,
@@ -201,6 +203,7 @@ fn extract_planes(
     distance_threshold: f64,
     min_inliers: usize,
     refinement_rounds: usize,
+    min_angle_deg: Option<f64>,
     confidence: f64,
     max_iterations: usize,
     seed: u64,
@@ -211,7 +214,15 @@ fn extract_planes(
         min_inliers,
         refinement_rounds,
         ransac: options(distance_threshold, confidence, max_iterations, seed),
+        min_angle_between: min_angle_deg.map(f64::to_radians),
     };
+    if let Some(a) = min_angle_deg {
+        if !(a.is_finite() && a > 0.0 && a < 90.0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "min_angle_deg must be in (0, 90), got {a}"
+            )));
+        }
+    }
     let found = run(py, move || rs_extract_planes(&points, &opts))?;
     Ok(found
         .into_iter()

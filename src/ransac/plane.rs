@@ -220,7 +220,15 @@ pub struct ExtractOptions {
     pub refinement_rounds: usize,
     /// Options of each RANSAC run (threshold, confidence, cap, seed).
     pub ransac: RansacOptions,
+    /// When set (radians), a plane within this angle of an already accepted plane is discarded:
+    /// its points leave the pool and the search goes on (at most [`MAX_DISCARDED`] times). The
+    /// calibration uses it to find three linearly independent planes when a surface comes in two
+    /// parallel parts (a facade with a recessed storey, a curb beside a road).
+    pub min_angle_between: Option<f64>,
 }
+
+/// Most planes [`extract_planes`] discards as too parallel to the accepted ones before giving up.
+pub const MAX_DISCARDED: usize = 4;
 
 impl ExtractOptions {
     /// `count` planes with threshold `distance_threshold`, at least 50 inliers each, 3 joint rounds.
@@ -230,6 +238,7 @@ impl ExtractOptions {
             min_inliers: 50,
             refinement_rounds: 3,
             ransac: RansacOptions::new(distance_threshold),
+            min_angle_between: None,
         }
     }
 }
@@ -290,16 +299,19 @@ pub fn extract_planes(
     let min_inliers = options.min_inliers.max(PlaneEstimator::SAMPLE_SIZE);
     let mut taken = vec![false; points.len()];
     let mut found: Vec<(Plane, usize)> = Vec::new();
-    for k in 0..options.count {
+    let mut discarded = 0;
+    let mut run = 0;
+    while found.len() < options.count {
         let remaining: Vec<usize> = (0..points.len()).filter(|&i| !taken[i]).collect();
         if remaining.len() < min_inliers {
             break;
         }
         let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
         let ransac_options = RansacOptions {
-            seed: mix_seed(options.ransac.seed, k),
+            seed: mix_seed(options.ransac.seed, run),
             ..options.ransac
         };
+        run += 1;
         let result = match ransac(&PlaneEstimator, &subset, &ransac_options) {
             Ok(r) => r,
             Err(Error::Degenerate(_)) => break,
@@ -311,14 +323,31 @@ pub fn extract_planes(
         for &i in &result.inliers {
             taken[remaining[i]] = true;
         }
+        let too_parallel = options.min_angle_between.is_some_and(|min_angle| {
+            found.iter().any(|(accepted, _)| {
+                accepted.normal.dot(&result.model.normal).abs() > min_angle.cos()
+            })
+        });
+        if too_parallel {
+            discarded += 1;
+            if discarded > MAX_DISCARDED {
+                break;
+            }
+            continue;
+        }
         found.push((result.model, result.hypotheses));
     }
     if found.len() < options.count {
         return Err(Error::Calibration(format!(
             "only {} plane(s) with at least {min_inliers} inliers within {threshold} m were found, \
-             {} wanted",
+             {} wanted{}",
             found.len(),
-            options.count
+            options.count,
+            if discarded > 0 {
+                format!(" ({discarded} more discarded as nearly parallel to those)")
+            } else {
+                String::new()
+            }
         )));
     }
 
