@@ -475,3 +475,22 @@ pub fn calibrate_planes(
         timings: clock.finish(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conditioning_refuses_nearly_parallel_normals() {
+        let p = |x: f64, y: f64, z: f64| Plane::new(Vector3::new(x, y, z), 1.0).unwrap();
+        let ok = [p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0), p(0.0, 0.0, 1.0)];
+        assert!(check_conditioning(&ok, "reference").is_ok());
+        let parallel = [p(1.0, 0.0, 0.0), p(1.0, 0.05, 0.0), p(0.0, 0.0, 1.0)];
+        let err = check_conditioning(&parallel, "target").unwrap_err().to_string();
+        assert!(err.contains("target cloud are not linearly independent"), "{err}");
+        assert!(err.contains("2.9 deg from parallel"), "{err}");
+        // Three normals in one plane (a prism's faces) have no common point either.
+        let coplanar = [p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0), p(1.0, 1.0, 0.0)];
+        assert!(check_conditioning(&coplanar, "reference").is_err());
+    }
+}
