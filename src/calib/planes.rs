@@ -486,8 +486,13 @@ mod tests {
         let ok = [p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0), p(0.0, 0.0, 1.0)];
         assert!(check_conditioning(&ok, "reference").is_ok());
         let parallel = [p(1.0, 0.0, 0.0), p(1.0, 0.05, 0.0), p(0.0, 0.0, 1.0)];
-        let err = check_conditioning(&parallel, "target").unwrap_err().to_string();
-        assert!(err.contains("target cloud are not linearly independent"), "{err}");
+        let err = check_conditioning(&parallel, "target")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("target cloud are not linearly independent"),
+            "{err}"
+        );
         assert!(err.contains("2.9 deg from parallel"), "{err}");
         // Three normals in one plane (a prism's faces) have no common point either.
         let coplanar = [p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0), p(1.0, 1.0, 0.0)];
