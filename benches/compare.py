@@ -125,8 +125,9 @@ def main() -> None:
     t, _ = median_time(lambda: _lidarcal.score_planes(points, hyps, ARGS.threshold), 5)
     rate = len(hyps) * len(points) / t
     print(
-        f"\nscoring throughput (score_planes, 256 planes x {len(points):,} points, inlier counts on,"
-        f" including the f32 copy): {rate:.3g} point-tests/s = {rate / ARGS.threads:.3g} per core"
+        f"\nscoring throughput (score_planes, 256 planes x {len(points):,} points, inlier counts"
+        f" on, including the f32 copy): {rate:.3g} point-tests/s"
+        f" = {rate / ARGS.threads:.3g} per core"
     )
 
 

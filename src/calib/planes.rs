@@ -2,8 +2,8 @@
 //! Calibration Algorithm Using Planar Surfaces" (IEEE IV 2019), with the errata of that text fixed.
 //!
 //! # Pipeline
-//! 1. **Threshold.** Unless given, each cloud's inlier distance is `3 sigma` of its own noise,
-//!    clamped to `[1 cm, 50 cm]`. `sigma` comes from the point-to-plane residuals of the cloud's
+//! 1. **Threshold.** Unless given, each cloud's inlier distance is `3 sigma` of its own noise, at
+//!    least 1 cm; a cloud whose `3 sigma` exceeds 50 cm shows no clear plane and is refused. `sigma` comes from the point-to-plane residuals of the cloud's
 //!    largest plane (found with a 25 cm threshold): three times, the plane is refitted by least
 //!    squares on the points within the current threshold, and the first quartile of their `|r|`,
 //!    divided by 0.3186 (its value for a unit Gaussian), gives `sigma` and the next threshold. A low quantile is used because the band around a plane also holds clutter and the
@@ -143,6 +143,9 @@ pub struct PlanarCalibration {
 }
 
 /// Estimates a cloud's inlier threshold as described in the module docs.
+///
+/// Returns [`Error::Calibration`] when `3 sigma` exceeds the upper bound of [`THRESHOLD_RANGE`]
+/// (a cloud without a clear plane, such as a blob).
 pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
     let mut options = RansacOptions::new(COARSE_THRESHOLD);
     options.seed = seed;
@@ -170,7 +173,14 @@ pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
         let q = residuals.len() / 4;
         let (_, quartile, _) = residuals.select_nth_unstable_by(q, |a, b| a.total_cmp(b));
         let sigma = *quartile / GAUSSIAN_ABS_QUARTILE;
-        threshold = (3.0 * sigma).clamp(THRESHOLD_RANGE.0, THRESHOLD_RANGE.1);
+        if 3.0 * sigma > THRESHOLD_RANGE.1 {
+            return Err(Error::Calibration(format!(
+                "no clearly planar surface: the points around the largest plane spread by \
+                 {sigma:.2} m (3 sigma > {} m); pass distance_threshold to override",
+                THRESHOLD_RANGE.1
+            )));
+        }
+        threshold = (3.0 * sigma).max(THRESHOLD_RANGE.0);
     }
     Ok(threshold)
 }

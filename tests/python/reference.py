@@ -363,3 +363,48 @@ def score_lines_f32(
         costs.append(float(np.sum(np.where(inside, d2, t2).astype(np.float64))))
         counts.append(int(inside.sum()))
     return np.array(costs), np.array(counts)
+
+
+# --- Planar calibration -------------------------------------------------------------------
+
+
+def plane_corner(planes: np.ndarray) -> np.ndarray:
+    """The point where three planes [n, d] meet (eq. 3 of the planar seed)."""
+    return np.linalg.solve(planes[:, :3], -planes[:, 3])
+
+
+def planar_pipeline(
+    planes_ref: np.ndarray,
+    planes_tgt: np.ndarray,
+    points_ref: list[np.ndarray],
+    points_tgt: list[np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The planar method from given planes (normals toward each sensor) and their inlier points,
+    with the target planes in any order. Returns (initial, refined, permutation): permutation[i]
+    is the target plane matched to reference plane i."""
+    import itertools
+
+    best = None
+    for perm in itertools.permutations(range(3)):
+        tgt = planes_tgt[list(perm)]
+        # Only correspondences that keep handedness are admissible.
+        if np.sign(np.linalg.det(planes_ref[:, :3])) != np.sign(np.linalg.det(tgt[:, :3])):
+            continue
+        r = kabsch(planes_ref[:, :3], tgt[:, :3])
+        score = np.sum((tgt[:, :3] @ r.T - planes_ref[:, :3]) ** 2)
+        if best is None or score < best[0]:
+            best = (score, perm, r)
+    assert best is not None
+    _, perm, r = best
+    tgt = planes_tgt[list(perm)]
+    initial = np.eye(4)
+    initial[:3, :3] = r
+    initial[:3, 3] = plane_corner(planes_ref) - r @ plane_corner(tgt)
+    # Symmetric cost: target points on reference planes, reference points on target planes.
+    groups_planes, groups_points, frames = [], [], []
+    for i in range(3):
+        groups_planes += [planes_ref[i], tgt[i]]
+        groups_points += [points_tgt[perm[i]], points_ref[i]]
+        frames += ["target", "reference"]
+    refined, _ = solve_planes(np.array(groups_planes), groups_points, frames, initial)
+    return initial, refined, np.array(perm)
