@@ -45,6 +45,7 @@
 pub mod beams;
 pub mod scenes;
 pub mod shapes;
+pub mod study;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use rand::{RngExt, SeedableRng};
