@@ -222,7 +222,7 @@ pub fn fit_cylinder(
             let p_new = p + b1 * step[0] + b2 * step[1];
             let d_new = Unit::new_normalize(d.into_inner() + b1 * step[2] + b2 * step[3]);
             let r_new = r + step[4];
-            if !(r_new > 0.0) {
+            if r_new.is_nan() || r_new <= 0.0 {
                 mu *= 10.0;
                 continue;
             }

@@ -248,7 +248,7 @@ pub fn paper_scene(options: &PaperOptions) -> Result<Scene> {
         &world_from_target.inverse(),
         &mut rng,
     )?;
-    let planes = [e2.cross(&up), up.cross(&e1), up]
+    let planes = [e1.cross(&up), e2.cross(&up), up]
         .iter()
         .map(|n| Plane::new(*n, 0.0))
         .collect::<Result<Vec<_>>>()?;
