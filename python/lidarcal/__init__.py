@@ -10,10 +10,14 @@ This release holds the numerical kernels the calibration methods build on:
 * :func:`refine_point_to_plane`, :func:`refine_point_to_line` -- Levenberg-Marquardt refinement
   of a transform from point-to-plane or point-to-line residuals, returning a :class:`RefineResult`.
 
+The scan simulator lives in :mod:`lidarcal.sim` (``from lidarcal import sim``) and the command
+line in ``lidarcal simulate``.
+
 Bad input raises ``ValueError`` naming the problem; a calibration that cannot be trusted raises
 :class:`CalibrationError`.
 """
 
+from lidarcal import sim  # the simulator, `from lidarcal import sim`
 from lidarcal._lidarcal import (
     CalibrationError,
     RefineResult,
@@ -36,6 +40,7 @@ __all__ = [
     "refine_point_to_plane",
     "se3_exp",
     "se3_log",
+    "sim",
     "so3_exp",
     "so3_log",
 ]

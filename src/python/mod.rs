@@ -12,6 +12,7 @@ use crate::Error;
 
 mod arrays;
 mod kernels;
+mod sim;
 
 create_exception!(
     lidarcal,
@@ -61,5 +62,6 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("CalibrationError", m.py().get_type::<CalibrationError>())?;
     kernels::register(m)?;
+    sim::register(m)?;
     Ok(())
 }
