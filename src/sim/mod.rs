@@ -19,9 +19,10 @@
 //!
 //! # Why poles need a cylinder fit
 //! A LiDAR sees the half of a pole that faces it, so a line fitted through a pole's points is offset
-//! from the axis toward the sensor by about `2 r / pi` (and two sensors see opposite sides). The
-//! study in `docs/pole_axis_study.md` (`cargo run --release --example pole_axis_study`) measures it
-//! with a simulated VLP-16 and shows that [`crate::fit::cylinder::fit_cylinder`] removes it.
+//! from the axis toward the sensor by about `pi r / 4` (and two sensors see opposite sides). The
+//! study in [`study`] (its table is `docs/pole_axis_study.md`; rerun it with
+//! `cargo run --release --example pole_axis_study`) measures this with a simulated VLP-16 and shows
+//! that [`crate::fit::cylinder::fit_cylinder`] removes it.
 //!
 //! # Example
 //! ```

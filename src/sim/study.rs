@@ -9,7 +9,9 @@
 //! measured in the horizontal plane at that height (the text's eq. 5 reading).
 //!
 //! `cargo run --release --example pole_axis_study` prints the full table; `docs/pole_axis_study.md`
-//! holds it.
+//! holds it and is included below.
+//!
+#![doc = include_str!("../../docs/pole_axis_study.md")]
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
