@@ -16,7 +16,7 @@ def _pose(z: float) -> np.ndarray:
 
 
 def test_scan_over_ground_matches_ring_elevations() -> None:
-    ground = sim.rectangle([-100, -100, 0], [200, 0, 0], [0, 200, 0])
+    ground = sim.rectangle([-100, -100, 0], [200, 0, 0], [0, 200, 0], intensity=(5.0, 40.0))
     model = sim.BeamModel("vlp16")
     pts = sim.scan([ground], model, _pose(2.0), seed=3, with_ring=True)
     assert pts.shape[1] == 5 and pts.dtype == np.float64
@@ -62,7 +62,7 @@ def test_scenes_ground_truth_and_determinism(kind: str) -> None:
     assert t.shape == (4, 4) and np.allclose(t[:3, :3] @ t[:3, :3].T, np.eye(3))
     tgt = scene.target[:, :3] @ t[:3, :3].T + t[:3, 3]
     labels = scene.target_labels
-    tol = 0.5 if kind == "paper" else 0.05
+    tol = 0.5 if kind == "paper" else 0.1  # 0.1 m isotropic / <= 0.015 m range noise
     for i, plane in enumerate(scene.planes):
         on = tgt[labels == i]
         assert len(on) > 100
