@@ -12,17 +12,19 @@ step "python environment ($VENV)"
 if [ ! -x "$VENV/bin/python" ]; then
     python3 -m venv "$VENV"
 fi
+# Absolute, so VENV may be relative or absolute (PYO3_PYTHON and pytest run from other dirs).
+VENV=$(cd "$VENV" && pwd)
 PY="$VENV/bin/python"
 if [ "${SKIP_SETUP:-0}" != 1 ]; then
     "$PY" -m pip install --quiet --upgrade pip
-    "$PY" -m pip install --quiet "maturin>=1.7,<2" "numpy>=1.22" "scipy>=1.9" "pytest>=7" "ruff>=0.6" "mypy>=1.10"
+    "$PY" -m pip install --quiet "maturin>=1.7,<2" "numpy>=1.22" "scipy>=1.9" "pytest>=7" "ruff>=0.6" "mypy>=1.10" "click>=8"
 fi
 
 step "cargo fmt --check"
 cargo fmt --all -- --check
 
 step "cargo clippy (all targets, all features)"
-PYO3_PYTHON="$PWD/$PY" cargo clippy --all-targets --all-features --quiet -- -D warnings
+PYO3_PYTHON="$PY" cargo clippy --all-targets --all-features --quiet -- -D warnings
 
 step "cargo test"
 cargo test --quiet
@@ -48,4 +50,4 @@ step "mypy"
 
 step "pytest"
 # Run from tests/ so `import lidarcal` resolves to the installed wheel, not the source tree.
-(cd tests/python && "../../$PY" -m pytest -q -c ../../pyproject.toml --rootdir ../..)
+(cd tests/python && "$PY" -m pytest -q -c ../../pyproject.toml --rootdir ../..)

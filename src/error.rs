@@ -4,7 +4,7 @@
 //! separate "the caller passed something malformed" ([`Error::InvalidInput`]), "the input is well
 //! formed but does not determine an answer" ([`Error::Degenerate`]) and "a calibration pipeline could
 //! not find a trustworthy solution" ([`Error::Calibration`]). The Python layer maps the first two to
-//! `ValueError` and the last to `lidarcal.CalibrationError`.
+//! `ValueError`, a calibration failure to `lidarcal.CalibrationError` and [`Error::Io`] to `OSError`.
 
 /// Errors returned by lidarcal.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -22,6 +22,9 @@ pub enum Error {
     /// A numerical routine produced non-finite values (a bug or an extreme input).
     #[error("numerical failure: {0}")]
     Numerical(String),
+    /// Reading or writing a file failed; the message names the path and the OS error.
+    #[error("I/O error: {0}")]
+    Io(String),
 }
 
 /// Shorthand for `Result<T, lidarcal::Error>`.

@@ -11,6 +11,10 @@
 //! * [`kabsch`](mod@kabsch): weighted Kabsch with the reflection fix and a documented degeneracy test.
 //! * [`lm`]: a Levenberg–Marquardt solver on SE(3) with a report (termination reason, `J^T J`).
 //! * [`residuals`]: point-to-plane and point-to-line problems with analytic Jacobians.
+//! * [`fit`]: plane, line and cylinder fits ([`fit::cylinder::fit_cylinder`] recovers a pole's axis).
+//! * [`sim`]: a scan simulator (VLP-16, HDL-32E, HDL-64E, OS1-128; walls, boxes, taped poles) with
+//!   ground-truth scenes.
+//! * `io` (feature `io`): a PCD writer.
 //!
 //! ## Features
 //! * `parallel` (default): rayon in residual accumulation. Results are bit-identical with or
@@ -64,6 +68,10 @@ pub mod kabsch;
 pub mod lm;
 pub mod ransac;
 pub mod residuals;
+pub mod sim;
+
+#[cfg(feature = "io")]
+pub mod io;
 
 #[cfg(feature = "python")]
 mod python;

@@ -17,10 +17,14 @@ The numerical kernels it builds on:
 * :func:`ransac_plane`, :func:`ransac_line`, :func:`extract_planes` -- deterministic parallel
   RANSAC, returning :class:`Plane` and :class:`Line` objects with their inliers.
 
+The scan simulator lives in :mod:`lidarcal.sim` (``from lidarcal import sim``) and the command
+line in ``lidarcal simulate``.
+
 Bad input raises ``ValueError`` naming the problem; a calibration that cannot be trusted raises
 :class:`CalibrationError`.
 """
 
+from lidarcal import sim  # the simulator, `from lidarcal import sim`
 from lidarcal._lidarcal import (
     CalibrationError,
     CalibrationResult,
@@ -57,6 +61,7 @@ __all__ = [
     "refine_point_to_plane",
     "se3_exp",
     "se3_log",
+    "sim",
     "so3_exp",
     "so3_log",
 ]

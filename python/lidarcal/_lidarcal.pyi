@@ -1,6 +1,7 @@
 """Type stubs of the compiled extension module ``lidarcal._lidarcal``."""
 
 from collections.abc import Sequence
+from os import PathLike
 from typing import Literal
 
 import numpy as np
@@ -201,3 +202,131 @@ def point_to_plane_residuals(
 def point_to_line_residuals(
     points: ArrayLike, line: ArrayLike, transform: ArrayLike, frame: Frame = "target"
 ) -> tuple[F64Array, F64Array]: ...
+
+# --- scan simulator (wrapped by lidarcal.sim) ---
+
+class BeamModel:
+    """A multi-beam LiDAR model: a preset by name or ``BeamModel.custom(...)``."""
+
+    def __init__(self, name: str) -> None: ...
+    @staticmethod
+    def custom(
+        elevations_deg: ArrayLike,
+        *,
+        columns: int = 1800,
+        min_range: float = 0.5,
+        max_range: float = 100.0,
+        range_noise: float = 0.01,
+        name: str = "custom",
+    ) -> BeamModel: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def beams(self) -> int: ...
+    @property
+    def columns(self) -> int: ...
+    @property
+    def elevations_deg(self) -> F64Array: ...
+    @property
+    def min_range(self) -> float: ...
+    @property
+    def max_range(self) -> float: ...
+    @property
+    def range_noise(self) -> float: ...
+
+class Shape:
+    """A shape in the world frame."""
+
+    @staticmethod
+    def rectangle(
+        corner: ArrayLike,
+        edge_u: ArrayLike,
+        edge_v: ArrayLike,
+        *,
+        intensity: tuple[float, float] = (20.0, 70.0),
+    ) -> Shape: ...
+    @staticmethod
+    def cuboid(
+        size: ArrayLike,
+        pose: ArrayLike | None = None,
+        *,
+        intensity: tuple[float, float] = (10.0, 90.0),
+    ) -> Shape: ...
+    @staticmethod
+    def cylinder(
+        base: ArrayLike,
+        direction: ArrayLike,
+        length: float,
+        radius: float,
+        *,
+        intensity: tuple[float, float] = (30.0, 80.0),
+        band: tuple[float, float] | None = None,
+        band_intensity: tuple[float, float] = (235.0, 255.0),
+    ) -> Shape: ...
+    @property
+    def kind(self) -> str: ...
+
+class Scene:
+    """Two sensors' points in their own frames and the ground truth."""
+
+    @property
+    def kind(self) -> str: ...
+    @property
+    def reference(self) -> F64Array: ...
+    @property
+    def target(self) -> F64Array: ...
+    @property
+    def reference_rings(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def target_rings(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def reference_labels(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def target_labels(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def reference_from_target(self) -> F64Array: ...
+    @property
+    def world_from_reference(self) -> F64Array: ...
+    @property
+    def planes(self) -> F64Array: ...
+    @property
+    def pole_axes(self) -> F64Array: ...
+    @property
+    def pole_radii(self) -> F64Array: ...
+
+def sim_scan(
+    shapes: Sequence[Shape],
+    model: str | BeamModel | None = None,
+    sensor_pose: ArrayLike | None = None,
+    *,
+    seed: int = 0,
+    noise: float | None = None,
+    dropout: float = 0.0,
+    with_ring: bool = False,
+) -> F64Array: ...
+def sim_corner_scene(
+    model: str | BeamModel | None = None,
+    *,
+    seed: int = 0,
+    clutter_boxes: int = 4,
+    extra_walls: int = 0,
+    noise: float | None = None,
+    dropout: float = 0.0,
+) -> Scene: ...
+def sim_poles_scene(
+    model: str | BeamModel | None = None,
+    *,
+    seed: int = 0,
+    radius: float = 0.1,
+    distance: float = 5.0,
+    distractor: bool = False,
+    noise: float | None = None,
+    dropout: float = 0.0,
+) -> Scene: ...
+def sim_paper_scene(
+    *, alpha_deg: float = 90.0, configuration: int | None = 1, seed: int = 0
+) -> Scene: ...
+def sim_pole_axis_trial(
+    distance: float, radius: float, seed: int
+) -> tuple[int, float, float, float, float]: ...
+def write_pcd(path: str | PathLike[str], points: ArrayLike, *, ascii: bool = False) -> None: ...

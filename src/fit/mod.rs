@@ -15,6 +15,8 @@
 //! assert!(fit.plane.signed_distance(&Point3::new(7.0, -3.0, 2.0)).abs() < 1e-12);
 //! ```
 
+pub mod cylinder;
+
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Unit, Vector3};
 
 use crate::error::{Error, Result};

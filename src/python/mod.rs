@@ -5,7 +5,7 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use pyo3::create_exception;
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
 use crate::Error;
@@ -14,6 +14,7 @@ mod arrays;
 mod calib;
 mod kernels;
 mod ransac;
+mod sim;
 
 create_exception!(
     lidarcal,
@@ -23,13 +24,14 @@ create_exception!(
 );
 
 /// One place where core errors become Python exceptions: malformed or degenerate input is a
-/// `ValueError`, a failed calibration a `lidarcal.CalibrationError`.
+/// `ValueError`, a failed calibration a `lidarcal.CalibrationError`, a file error an `OSError`.
 impl From<Error> for PyErr {
     fn from(e: Error) -> PyErr {
         match e {
             Error::InvalidInput(m) | Error::Degenerate(m) => PyValueError::new_err(m),
             Error::Calibration(m) => CalibrationError::new_err(m),
             Error::Numerical(m) => CalibrationError::new_err(format!("numerical failure: {m}")),
+            Error::Io(m) => PyOSError::new_err(m),
         }
     }
 }
@@ -64,5 +66,6 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     kernels::register(m)?;
     ransac::register(m)?;
     calib::register(m)?;
+    sim::register(m)?;
     Ok(())
 }

@@ -1,0 +1,564 @@
+//! Python wrappers of the scan simulator (`lidarcal.sim`) and the PCD writer.
+
+use nalgebra::{Isometry3, Point3};
+use numpy::ndarray::{Array1, Ix1, Ix2};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PySequence;
+
+use super::arrays::{self, row_major, to_numpy};
+use super::run;
+use crate::geometry;
+use crate::sim::scenes::{
+    corner_scene, paper_scene, poles_scene, CornerOptions, PaperConfiguration, PaperOptions,
+    PolesOptions,
+};
+use crate::sim::shapes::{self, IntensityRange};
+use crate::sim::{self as core_sim, Scan, ScanOptions};
+
+fn intensity_arg(value: (f64, f64)) -> PyResult<IntensityRange> {
+    Ok(IntensityRange::new(value.0, value.1)?)
+}
+
+fn pose_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Isometry3<f64>> {
+    obj.map_or(Ok(Isometry3::identity()), |m| {
+        geometry::isometry_from_matrix(&arrays::matrix4(m, name)?)
+            .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
+    })
+}
+
+fn point_arg(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Point3<f64>> {
+    Ok(Point3::from(arrays::vector3(obj, name)?))
+}
+
+/// A multi-beam LiDAR model: a preset by name ("vlp16", "hdl32", "hdl64", "os128") or
+/// BeamModel.custom(...).
+#[pyclass(frozen, module = "lidarcal", name = "BeamModel")]
+#[derive(Clone)]
+pub(crate) struct BeamModel {
+    inner: core_sim::BeamModel,
+}
+
+#[pymethods]
+impl BeamModel {
+    #[new]
+    fn new(name: &str) -> PyResult<Self> {
+        Ok(BeamModel {
+            inner: core_sim::BeamModel::from_name(name)?,
+        })
+    }
+    /// A custom model from beam elevations in degrees.
+    #[staticmethod]
+    #[pyo3(signature = (elevations_deg, *, columns=1800, min_range=0.5, max_range=100.0, range_noise=0.01, name="custom"))]
+    fn custom(
+        elevations_deg: &Bound<'_, PyAny>,
+        columns: usize,
+        min_range: f64,
+        max_range: f64,
+        range_noise: f64,
+        name: &str,
+    ) -> PyResult<Self> {
+        let e = arrays::vector(elevations_deg, "elevations_deg", None)?;
+        Ok(BeamModel {
+            inner: core_sim::BeamModel::custom(
+                name,
+                &e,
+                columns,
+                min_range,
+                max_range,
+                range_noise,
+            )?,
+        })
+    }
+    #[getter]
+    fn name(&self) -> String {
+        self.inner.name().to_string()
+    }
+    #[getter]
+    fn beams(&self) -> usize {
+        self.inner.beams()
+    }
+    #[getter]
+    fn columns(&self) -> usize {
+        self.inner.columns()
+    }
+    #[getter]
+    fn elevations_deg<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let e: Vec<f64> = self
+            .inner
+            .elevations()
+            .iter()
+            .map(|e| e.to_degrees())
+            .collect();
+        to_numpy(py, Ix1(e.len()), e)
+    }
+    #[getter]
+    fn min_range(&self) -> f64 {
+        self.inner.min_range()
+    }
+    #[getter]
+    fn max_range(&self) -> f64 {
+        self.inner.max_range()
+    }
+    #[getter]
+    fn range_noise(&self) -> f64 {
+        self.inner.range_noise()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "BeamModel(name='{}', beams={}, columns={}, range=[{}, {}], range_noise={})",
+            self.inner.name(),
+            self.inner.beams(),
+            self.inner.columns(),
+            self.inner.min_range(),
+            self.inner.max_range(),
+            self.inner.range_noise()
+        )
+    }
+}
+
+/// A model name or a BeamModel; None is the VLP-16.
+fn model_arg(obj: Option<&Bound<'_, PyAny>>) -> PyResult<core_sim::BeamModel> {
+    let Some(obj) = obj else {
+        return Ok(core_sim::BeamModel::preset(core_sim::Preset::Vlp16));
+    };
+    if let Ok(m) = obj.cast::<BeamModel>() {
+        return Ok(m.get().inner.clone());
+    }
+    let name: String = obj.extract().map_err(|_| {
+        PyValueError::new_err(
+            "model must be a model name (vlp16, hdl32, hdl64, os128) or a BeamModel",
+        )
+    })?;
+    Ok(core_sim::BeamModel::from_name(&name)?)
+}
+
+/// A shape in the world frame; build it with Shape.rectangle, Shape.cuboid or Shape.cylinder.
+#[pyclass(frozen, module = "lidarcal", name = "Shape")]
+#[derive(Clone)]
+pub(crate) struct Shape {
+    inner: shapes::Shape,
+}
+
+#[pymethods]
+impl Shape {
+    /// A rectangle corner + s * edge_u + t * edge_v, s, t in [0, 1] (edges orthogonal).
+    #[staticmethod]
+    #[pyo3(signature = (corner, edge_u, edge_v, *, intensity=(20.0, 70.0)))]
+    fn rectangle(
+        corner: &Bound<'_, PyAny>,
+        edge_u: &Bound<'_, PyAny>,
+        edge_v: &Bound<'_, PyAny>,
+        intensity: (f64, f64),
+    ) -> PyResult<Self> {
+        let r = shapes::Rectangle::new(
+            point_arg(corner, "corner")?,
+            arrays::vector3(edge_u, "edge_u")?,
+            arrays::vector3(edge_v, "edge_v")?,
+        )?;
+        Ok(Shape {
+            inner: shapes::Shape::rectangle(r, intensity_arg(intensity)?),
+        })
+    }
+    /// A box of full size (sx, sy, sz) centred at the origin of pose (4x4 world_from_box).
+    #[staticmethod]
+    #[pyo3(signature = (size, pose=None, *, intensity=(10.0, 90.0)))]
+    fn cuboid(
+        size: &Bound<'_, PyAny>,
+        pose: Option<&Bound<'_, PyAny>>,
+        intensity: (f64, f64),
+    ) -> PyResult<Self> {
+        let b = shapes::Cuboid::new(pose_arg(pose, "pose")?, arrays::vector3(size, "size")?)?;
+        Ok(Shape {
+            inner: shapes::Shape::cuboid(b, intensity_arg(intensity)?),
+        })
+    }
+    /// A finite cylinder from its base centre, axis direction, length and radius, with an optional
+    /// band (start, end) in metres from the base returning band_intensity.
+    #[staticmethod]
+    #[pyo3(signature = (base, direction, length, radius, *, intensity=(30.0, 80.0), band=None, band_intensity=(235.0, 255.0)))]
+    fn cylinder(
+        base: &Bound<'_, PyAny>,
+        direction: &Bound<'_, PyAny>,
+        length: f64,
+        radius: f64,
+        intensity: (f64, f64),
+        band: Option<(f64, f64)>,
+        band_intensity: (f64, f64),
+    ) -> PyResult<Self> {
+        let mut c = shapes::Cylinder::new(
+            point_arg(base, "base")?,
+            arrays::vector3(direction, "direction")?,
+            length,
+            radius,
+        )?;
+        if let Some((start, end)) = band {
+            c = c.with_band(start, end, intensity_arg(band_intensity)?)?;
+        }
+        Ok(Shape {
+            inner: shapes::Shape::cylinder(c, intensity_arg(intensity)?),
+        })
+    }
+    /// "rectangle", "cuboid" or "cylinder".
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match self.inner.geometry {
+            shapes::Geometry::Rectangle(_) => "rectangle",
+            shapes::Geometry::Cuboid(_) => "cuboid",
+            shapes::Geometry::Cylinder(_) => "cylinder",
+        }
+    }
+    fn __repr__(&self) -> String {
+        format!("Shape(kind='{}')", self.kind())
+    }
+}
+
+fn shapes_arg(obj: &Bound<'_, PyAny>) -> PyResult<Vec<shapes::Shape>> {
+    let seq = obj
+        .cast::<PySequence>()
+        .map_err(|_| PyValueError::new_err("shapes must be a sequence of lidarcal.sim.Shape"))?;
+    (0..seq.len()?)
+        .map(|i| {
+            let item = seq.get_item(i)?;
+            let shape = item.cast::<Shape>().map_err(|_| {
+                PyValueError::new_err(format!("shapes[{i}] is not a lidarcal.sim.Shape"))
+            })?;
+            Ok(shape.get().inner)
+        })
+        .collect()
+}
+
+fn scan_rows(scan: &Scan, with_ring: bool) -> (usize, usize, Vec<f64>) {
+    let cols = if with_ring { 5 } else { 4 };
+    let mut data = Vec::with_capacity(scan.len() * cols);
+    for p in &scan.points {
+        data.extend_from_slice(&[p.position.x, p.position.y, p.position.z, p.intensity]);
+        if with_ring {
+            data.push(f64::from(p.ring));
+        }
+    }
+    (scan.len(), cols, data)
+}
+
+fn scan_array<'py>(
+    py: Python<'py>,
+    scan: &Scan,
+    with_ring: bool,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let (n, cols, data) = scan_rows(scan, with_ring);
+    to_numpy(py, Ix2(n, cols), data)
+}
+
+/// Simulates one revolution; returns (N, 4) [x, y, z, intensity] (or (N, 5) with the ring) in the
+/// sensor frame, ring-major.
+#[pyfunction]
+#[pyo3(signature = (shapes, model=None, sensor_pose=None, *, seed=0, noise=None, dropout=0.0, with_ring=false))]
+#[allow(clippy::too_many_arguments)]
+fn sim_scan<'py>(
+    py: Python<'py>,
+    shapes: &Bound<'py, PyAny>,
+    model: Option<&Bound<'py, PyAny>>,
+    sensor_pose: Option<&Bound<'py, PyAny>>,
+    seed: u64,
+    noise: Option<f64>,
+    dropout: f64,
+    with_ring: bool,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let shapes = shapes_arg(shapes)?;
+    let model = model_arg(model)?;
+    let pose = pose_arg(sensor_pose, "sensor_pose")?;
+    let options = ScanOptions {
+        seed,
+        range_noise: noise,
+        dropout,
+    };
+    let scan = run(py, move || core_sim::scan(&model, &shapes, &pose, &options))?;
+    scan_array(py, &scan, with_ring)
+}
+
+/// A simulated scene: two sensors' points in their own frames and the ground truth.
+#[pyclass(frozen, module = "lidarcal", name = "Scene")]
+pub(crate) struct Scene {
+    kind: &'static str,
+    inner: core_sim::Scene,
+}
+
+fn matrix<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    to_numpy(py, Ix2(4, 4), row_major(&pose.to_homogeneous()))
+}
+
+fn rings<'py>(py: Python<'py>, scan: &Scan) -> Bound<'py, PyArray1<i64>> {
+    let r: Vec<i64> = scan.points.iter().map(|p| i64::from(p.ring)).collect();
+    Array1::from_vec(r).into_pyarray(py)
+}
+
+fn labels<'py>(py: Python<'py>, scan: &Scan) -> Bound<'py, PyArray1<i64>> {
+    let r: Vec<i64> = scan
+        .points
+        .iter()
+        .map(|p| p.shape.map_or(-1, |s| i64::try_from(s).unwrap_or(-1)))
+        .collect();
+    Array1::from_vec(r).into_pyarray(py)
+}
+
+#[pymethods]
+impl Scene {
+    /// "corner", "poles" or "paper".
+    #[getter]
+    fn kind(&self) -> &'static str {
+        self.kind
+    }
+    /// (N, 4) reference points [x, y, z, intensity] in the reference frame.
+    #[getter]
+    fn reference<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        scan_array(py, &self.inner.reference, false)
+    }
+    /// (M, 4) target points in the target frame.
+    #[getter]
+    fn target<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        scan_array(py, &self.inner.target, false)
+    }
+    /// (N,) ring index of each reference point.
+    #[getter]
+    fn reference_rings<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        rings(py, &self.inner.reference)
+    }
+    /// (M,) ring index of each target point.
+    #[getter]
+    fn target_rings<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        rings(py, &self.inner.target)
+    }
+    /// (N,) index of the shape each reference point hit (-1: clutter of the paper protocol).
+    #[getter]
+    fn reference_labels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        labels(py, &self.inner.reference)
+    }
+    /// (M,) index of the shape each target point hit.
+    #[getter]
+    fn target_labels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        labels(py, &self.inner.target)
+    }
+    /// (4, 4) true reference_from_target.
+    #[getter]
+    fn reference_from_target<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        matrix(py, &self.inner.reference_from_target)
+    }
+    /// (4, 4) pose of the reference sensor in the scene's world frame.
+    #[getter]
+    fn world_from_reference<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        matrix(py, &self.inner.world_from_reference)
+    }
+    /// (K, 4) true planes [nx, ny, nz, d] in the reference frame, normals toward the reference sensor.
+    #[getter]
+    fn planes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let data: Vec<f64> = self
+            .inner
+            .planes
+            .iter()
+            .flat_map(|p| [p.normal.x, p.normal.y, p.normal.z, p.offset])
+            .collect();
+        to_numpy(py, Ix2(self.inner.planes.len(), 4), data)
+    }
+    /// (K, 6) true pole axes [px, py, pz, dx, dy, dz] in the reference frame (base point, up).
+    #[getter]
+    fn pole_axes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let data: Vec<f64> = self
+            .inner
+            .poles
+            .iter()
+            .flat_map(|p| {
+                let (q, d) = (p.axis.point, p.axis.direction);
+                [q.x, q.y, q.z, d.x, d.y, d.z]
+            })
+            .collect();
+        to_numpy(py, Ix2(self.inner.poles.len(), 6), data)
+    }
+    /// (K,) pole radii.
+    #[getter]
+    fn pole_radii<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let r: Vec<f64> = self.inner.poles.iter().map(|p| p.radius).collect();
+        to_numpy(py, Ix1(r.len()), r)
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene(kind='{}', reference={} points, target={} points, planes={}, poles={})",
+            self.kind,
+            self.inner.reference.len(),
+            self.inner.target.len(),
+            self.inner.planes.len(),
+            self.inner.poles.len()
+        )
+    }
+}
+
+/// The building-corner scene.
+#[pyfunction]
+#[pyo3(signature = (model=None, *, seed=0, clutter_boxes=4, extra_walls=0, noise=None, dropout=0.0))]
+fn sim_corner_scene<'py>(
+    py: Python<'py>,
+    model: Option<&Bound<'py, PyAny>>,
+    seed: u64,
+    clutter_boxes: usize,
+    extra_walls: usize,
+    noise: Option<f64>,
+    dropout: f64,
+) -> PyResult<Scene> {
+    let model = model_arg(model)?;
+    let options = CornerOptions {
+        seed,
+        clutter_boxes,
+        extra_walls,
+        range_noise: noise,
+        dropout,
+    };
+    let inner = run(py, move || corner_scene(&model, &options))?;
+    Ok(Scene {
+        kind: "corner",
+        inner,
+    })
+}
+
+/// The two-poles scene.
+#[pyfunction]
+#[pyo3(signature = (model=None, *, seed=0, radius=0.1, distance=5.0, distractor=false, noise=None, dropout=0.0))]
+#[allow(clippy::too_many_arguments)]
+fn sim_poles_scene<'py>(
+    py: Python<'py>,
+    model: Option<&Bound<'py, PyAny>>,
+    seed: u64,
+    radius: f64,
+    distance: f64,
+    distractor: bool,
+    noise: Option<f64>,
+    dropout: f64,
+) -> PyResult<Scene> {
+    let model = model_arg(model)?;
+    let options = PolesOptions {
+        seed,
+        radius,
+        distance,
+        distractor,
+        range_noise: noise,
+        dropout,
+    };
+    let inner = run(py, move || poles_scene(&model, &options))?;
+    Ok(Scene {
+        kind: "poles",
+        inner,
+    })
+}
+
+/// The paper's synthetic protocol; configuration 1 or 2 (Table II) or None (random).
+#[pyfunction]
+#[pyo3(signature = (*, alpha_deg=90.0, configuration=Some(1), seed=0))]
+fn sim_paper_scene(
+    py: Python<'_>,
+    alpha_deg: f64,
+    configuration: Option<u8>,
+    seed: u64,
+) -> PyResult<Scene> {
+    let configuration = match configuration {
+        Some(1) => PaperConfiguration::One,
+        Some(2) => PaperConfiguration::Two,
+        None => PaperConfiguration::Random,
+        Some(other) => {
+            return Err(PyValueError::new_err(format!(
+                "configuration must be 1, 2 or None (random), got {other}"
+            )))
+        }
+    };
+    let options = PaperOptions {
+        alpha_deg,
+        configuration,
+        seed,
+    };
+    let inner = run(py, move || paper_scene(&options))?;
+    Ok(Scene {
+        kind: "paper",
+        inner,
+    })
+}
+
+/// Writes (N, 4) [x, y, z, intensity] or (N, 5) [..., ring] points as a PCD v0.7 file.
+#[pyfunction]
+#[pyo3(signature = (path, points, *, ascii=false))]
+fn write_pcd(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    points: &Bound<'_, PyAny>,
+    ascii: bool,
+) -> PyResult<()> {
+    let d = arrays::dense(points, "points")?;
+    let cols = match d.shape.as_slice() {
+        [_, c @ (4 | 5)] => *c,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "points must have shape (N, 4) or (N, 5), got {:?}",
+                d.shape
+            )))
+        }
+    };
+    let with_ring = cols == 5;
+    let mut records = Vec::with_capacity(d.data.len() / cols);
+    for (i, row) in d.data.chunks_exact(cols).enumerate() {
+        let ring = if with_ring {
+            let r = row[4];
+            if !(r.fract() == 0.0 && (0.0..=f64::from(u16::MAX)).contains(&r)) {
+                return Err(PyValueError::new_err(format!(
+                    "points[{i}, 4] (ring) must be an integer in [0, 65535], got {r}"
+                )));
+            }
+            r as u16
+        } else {
+            0
+        };
+        records.push(crate::io::pcd::PcdPoint {
+            position: Point3::new(row[0], row[1], row[2]),
+            intensity: row[3],
+            ring,
+        });
+    }
+    let format = if ascii {
+        crate::io::pcd::PcdFormat::Ascii
+    } else {
+        crate::io::pcd::PcdFormat::Binary
+    };
+    run(py, move || {
+        crate::io::pcd::write_pcd_file(&path, &records, with_ring, format)
+    })
+}
+
+/// The centroid-line and cylinder axis errors of one pole-axis study trial:
+/// (points, line_error, cylinder_error, cylinder_free_radius_error, estimated_radius).
+#[pyfunction]
+fn sim_pole_axis_trial(
+    py: Python<'_>,
+    distance: f64,
+    radius: f64,
+    seed: u64,
+) -> PyResult<(usize, f64, f64, f64, f64)> {
+    let t = run(py, move || {
+        crate::sim::study::pole_axis_trial(distance, radius, seed)
+    })?;
+    Ok((
+        t.points,
+        t.line_error,
+        t.cylinder_error,
+        t.cylinder_free_radius_error,
+        t.estimated_radius,
+    ))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<BeamModel>()?;
+    m.add_class::<Shape>()?;
+    m.add_class::<Scene>()?;
+    m.add_function(wrap_pyfunction!(sim_scan, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_corner_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_poles_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_paper_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_pole_axis_trial, m)?)?;
+    m.add_function(wrap_pyfunction!(write_pcd, m)?)?;
+    Ok(())
+}
