@@ -67,6 +67,22 @@ impl Loss {
         }
     }
 
+    /// `rho'(s)` alone: the IRLS weight, without the logarithm or root of the cost.
+    #[inline]
+    pub fn weight(&self, s: f64) -> f64 {
+        match *self {
+            Loss::Squared => 1.0,
+            Loss::Huber { delta } => {
+                if s <= delta * delta {
+                    1.0
+                } else {
+                    delta / s.sqrt()
+                }
+            }
+            Loss::Cauchy { scale } => 1.0 / (1.0 + s / (scale * scale)),
+        }
+    }
+
     /// Checks the loss parameter is finite and positive.
     pub fn validate(&self) -> Result<()> {
         match *self {
@@ -158,28 +174,41 @@ impl NormalEquations {
 /// added in order, so results are bit-identical for any number of threads.
 const CHUNK: usize = 2048;
 
+/// A sum that can be accumulated in independent chunks and merged.
+pub trait Accumulator: Default + Send {
+    /// Adds another partial sum into this one.
+    fn merge(&mut self, other: &Self);
+}
+
+impl Accumulator for NormalEquations {
+    fn merge(&mut self, other: &Self) {
+        NormalEquations::merge(self, other);
+    }
+}
+
 /// Accumulates `f(item, &mut acc)` over `items`, in parallel with the `parallel` feature, and
 /// deterministically for any thread count (fixed chunks, summed in order).
-pub fn accumulate<T, F>(items: &[T], f: F) -> NormalEquations
+pub fn accumulate<T, A, F>(items: &[T], f: F) -> A
 where
     T: Sync,
-    F: Fn(&T, &mut NormalEquations) + Sync,
+    A: Accumulator,
+    F: Fn(&T, &mut A) + Sync,
 {
     let chunk_sum = |chunk: &[T]| {
-        let mut acc = NormalEquations::default();
+        let mut acc = A::default();
         for item in chunk {
             f(item, &mut acc);
         }
         acc
     };
     #[cfg(feature = "parallel")]
-    let partials: Vec<NormalEquations> = {
+    let partials: Vec<A> = {
         use rayon::prelude::*;
         items.par_chunks(CHUNK).map(chunk_sum).collect()
     };
     #[cfg(not(feature = "parallel"))]
-    let partials: Vec<NormalEquations> = items.chunks(CHUNK).map(chunk_sum).collect();
-    let mut total = NormalEquations::default();
+    let partials: Vec<A> = items.chunks(CHUNK).map(chunk_sum).collect();
+    let mut total = A::default();
     for p in &partials {
         total.merge(p);
     }
@@ -464,6 +493,7 @@ mod tests {
                 let eps = 1e-6;
                 let numeric = (loss.evaluate(s + eps).0 - loss.evaluate(s - eps).0) / (2.0 * eps);
                 assert!((numeric - loss.evaluate(s).1).abs() < 1e-8);
+                assert_eq!(loss.weight(s), loss.evaluate(s).1);
             }
         }
         assert!(Loss::Huber { delta: 0.0 }.validate().is_err());

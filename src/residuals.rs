@@ -49,7 +49,7 @@ use crate::geometry::hat;
 use crate::error::{ensure_finite, Error, Result};
 use crate::fit::Moments;
 use crate::geometry::{orthonormal_basis, Line, Plane};
-use crate::lm::{accumulate, LeastSquaresProblem, Loss, NormalEquations};
+use crate::lm::{accumulate, Accumulator, LeastSquaresProblem, Loss, NormalEquations};
 
 /// Which sensor's frame a group's points are expressed in (the feature is in the other one).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -125,6 +125,37 @@ impl PointToPlane {
         &self.groups
     }
 
+    /// The weighted least-squares problem of one IRLS step at `pose`: every point weighted by
+    /// `rho'(r^2)` of its residual there, summarised as weighted moments (one pass, no
+    /// logarithms). Iterating "solve it, re-weight at the solution" converges to a stationary
+    /// point of this robust problem: there `sum rho'(r^2) r J = 0`, its gradient.
+    pub fn reweighted(&self, pose: &Isometry3<f64>) -> Result<PlaneMomentsProblem> {
+        let weigh = |g: &PlaneGroup| {
+            let term = PlaneTerm::new(g, pose);
+            let origin = g.points.first().copied().unwrap_or_else(Point3::origin);
+            let mut moments = Moments::new(origin);
+            for p in &g.points {
+                let r = term.distance(p);
+                moments.add_weighted(p, self.loss.weight(r * r));
+            }
+            PlaneMomentGroup {
+                plane: g.plane,
+                moments,
+                frame: g.frame,
+            }
+        };
+        // Groups are independent: in parallel, each summed in order, so the result is the same
+        // for any thread count.
+        #[cfg(feature = "parallel")]
+        let groups = {
+            use rayon::prelude::*;
+            self.groups.par_iter().map(weigh).collect()
+        };
+        #[cfg(not(feature = "parallel"))]
+        let groups = self.groups.iter().map(weigh).collect();
+        PlaneMomentsProblem::new(groups)
+    }
+
     /// Residual and Jacobian row of every point, group after group (for checks and diagnostics).
     pub fn residuals(&self, pose: &Isometry3<f64>) -> Vec<(f64, Vector6<f64>)> {
         let mut out = Vec::with_capacity(self.count);
@@ -193,31 +224,117 @@ impl PlaneTerm {
     }
 }
 
+/// IRLS-weighted sums of one plane group in the residual frame: `sum w`, `sum w q`,
+/// `sum w q q^T` with `w = rho'(r^2)`, plus the cost `1/2 sum rho(r^2)`.
+#[derive(Debug, Clone, Copy, Default)]
+struct WeightedSums {
+    weight: f64,
+    first: Vector3<f64>,
+    second: Matrix3<f64>,
+    cost: f64,
+    count: usize,
+}
+
+impl Accumulator for WeightedSums {
+    fn merge(&mut self, o: &Self) {
+        self.weight += o.weight;
+        self.first += o.first;
+        self.second += o.second;
+        self.cost += o.cost;
+        self.count += o.count;
+    }
+}
+
 impl LeastSquaresProblem for PointToPlane {
     fn residual_count(&self) -> usize {
         self.count
     }
 
+    /// Per point only the residual, its weight and the weighted first and second moments are
+    /// accumulated; `J^T W J` and `J^T W r` follow in closed form (see [`PlaneMomentsProblem`]),
+    /// because every Jacobian row is affine in the point.
     fn normal_equations(&self, pose: &Isometry3<f64>, with_derivatives: bool) -> NormalEquations {
         let loss = self.loss;
         let mut total = NormalEquations::default();
         for g in &self.groups {
             let term = PlaneTerm::new(g, pose);
-            let part = if with_derivatives {
-                accumulate(&g.points, |p, acc| {
-                    let (r, j) = term.residual(p);
-                    acc.add(r, &j, loss);
-                })
-            } else {
-                accumulate(&g.points, |p, acc| {
-                    let r = term.distance(p);
-                    acc.add_cost(r * r, 1, loss);
-                })
+            if !with_derivatives {
+                let part: NormalEquations =
+                    accumulate(&g.points, |p, acc: &mut NormalEquations| {
+                        let r = term.distance(p);
+                        acc.add_cost(r * r, 1, loss);
+                    });
+                total.merge(&part);
+                continue;
+            }
+            let sums: WeightedSums = accumulate(&g.points, |p, acc: &mut WeightedSums| {
+                let q = match term.frame {
+                    Frame::Target => (term.pose * p).coords,
+                    Frame::Reference => p.coords,
+                };
+                let r = term.normal.dot(&q) + term.offset;
+                let (rho, w) = loss.evaluate(r * r);
+                acc.weight += w;
+                acc.first += q * w;
+                acc.second.syger(w, &q, &q, 1.0);
+                acc.cost += 0.5 * rho;
+                acc.count += 1;
+            });
+            let mut second = sums.second;
+            second.fill_upper_triangle_with_lower_triangle();
+            let sign = match term.frame {
+                Frame::Target => 1.0,
+                Frame::Reference => -1.0,
             };
+            let mut part = plane_normal_equations(
+                &term.normal,
+                term.offset,
+                sign,
+                sums.weight,
+                &sums.first,
+                &second,
+            );
+            part.cost = sums.cost;
+            part.residual_count = sums.count;
             total.merge(&part);
         }
         total
     }
+}
+
+/// `J^T W J` and `J^T W r` of a plane group from its weighted sums: residual `r = n . q + d`,
+/// Jacobian row `[sign n, -sign [n]x q]` (target points: sign +1, `q = T p`; reference points:
+/// sign -1, `q = p` against the plane moved into the reference frame). `weight = sum w`,
+/// `first = sum w q`, `second = sum w q q^T` (full symmetric). Cost and count are left at zero.
+fn plane_normal_equations(
+    normal: &Vector3<f64>,
+    offset: f64,
+    sign: f64,
+    weight: f64,
+    first: &Vector3<f64>,
+    second: &Matrix3<f64>,
+) -> NormalEquations {
+    let k = hat(normal) * (-sign);
+    let sum_r = normal.dot(first) + weight * offset;
+    let sum_rq = second * normal + first * offset;
+    let top_left = normal * normal.transpose() * weight;
+    let top_right = normal * (k * first).transpose() * sign;
+    let bottom_right = k * second * k.transpose();
+    let mut ne = NormalEquations::default();
+    ne.hessian.fixed_view_mut::<3, 3>(0, 0).copy_from(&top_left);
+    ne.hessian
+        .fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&top_right);
+    ne.hessian
+        .fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&top_right.transpose());
+    ne.hessian
+        .fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&bottom_right);
+    let top = normal * (sum_r * sign);
+    let bottom = k * sum_rq;
+    ne.gradient = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
+    ne
 }
 
 /// Point-to-line alignment: `sum rho(dist^2)` over every point of every group.
@@ -328,7 +445,7 @@ impl LeastSquaresProblem for PointToLine {
         let mut total = NormalEquations::default();
         for g in &self.groups {
             let term = LineTerm::new(g, pose);
-            let part = accumulate(&g.points, |p, acc| {
+            let part = accumulate(&g.points, |p, acc: &mut NormalEquations| {
                 let (r, j) = term.residual(p);
                 if with_derivatives {
                     acc.add_block(&r, &j, loss);
@@ -387,7 +504,7 @@ impl PlaneMomentsProblem {
             .iter()
             .map(|g| {
                 let stats = GroupStats::new(g, pose);
-                (stats.sum_r2 / stats.n).sqrt()
+                (stats.sum_r2 / stats.n).sqrt() // weighted RMS when the moments are weighted
             })
             .collect()
     }
@@ -408,7 +525,7 @@ struct GroupStats {
 
 impl GroupStats {
     fn new(g: &PlaneMomentGroup, pose: &Isometry3<f64>) -> Self {
-        let n = g.moments.count() as f64;
+        let n = g.moments.weight();
         let mean = g.moments.mean().coords;
         let scatter = g.moments.scatter();
         let (normal, offset, mean_q, scatter_q, sign) = match g.frame {
@@ -458,23 +575,10 @@ impl LeastSquaresProblem for PlaneMomentsProblem {
             if !with_derivatives {
                 continue;
             }
-            // Rows: J = [sign * n, w] with w = q x n (target) or n x q (reference) = -sign * [n]x q.
-            let k = hat(&s.normal) * (-s.sign);
-            let sum_r = s.normal.dot(&s.sigma) + s.n * s.offset;
-            let sum_rq = s.second * s.normal + s.sigma * s.offset;
-            let top_left = s.normal * s.normal.transpose() * s.n;
-            let top_right = s.normal * (k * s.sigma).transpose() * s.sign;
-            let bottom_right = k * s.second * k.transpose();
-            let mut h = nalgebra::Matrix6::zeros();
-            h.fixed_view_mut::<3, 3>(0, 0).copy_from(&top_left);
-            h.fixed_view_mut::<3, 3>(0, 3).copy_from(&top_right);
-            h.fixed_view_mut::<3, 3>(3, 0)
-                .copy_from(&top_right.transpose());
-            h.fixed_view_mut::<3, 3>(3, 3).copy_from(&bottom_right);
-            ne.hessian += h;
-            let top = s.normal * (sum_r * s.sign);
-            let bottom = k * sum_rq;
-            ne.gradient += Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
+            let part =
+                plane_normal_equations(&s.normal, s.offset, s.sign, s.n, &s.sigma, &s.second);
+            ne.hessian += part.hessian;
+            ne.gradient += part.gradient;
         }
         ne
     }

@@ -47,12 +47,20 @@ fn any_mounting_is_recovered_without_initial_guess() {
 fn robust_loss_path_agrees_with_sufficient_statistics() {
     let truth = pose_rpy_deg(5.0, -3.0, 60.0, [0.4, -0.2, 0.1]);
     let (reference, target) = two_sensor_corner(&truth, 2000, 500, 0.02, 3);
-    let plain = calibrate_planes(&reference, &target, &PlanarOptions::default()).unwrap();
+    let plain = calibrate_planes(
+        &reference,
+        &target,
+        &PlanarOptions {
+            loss: Some(Loss::Squared),
+            ..PlanarOptions::default()
+        },
+    )
+    .unwrap();
     let huber = calibrate_planes(
         &reference,
         &target,
         &PlanarOptions {
-            loss: Loss::Huber { delta: 0.05 },
+            loss: Some(Loss::Huber { delta: 0.05 }),
             ..PlanarOptions::default()
         },
     )

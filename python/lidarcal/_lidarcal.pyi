@@ -96,8 +96,8 @@ def calibrate_planes(
     seed: int = 0,
     up: ArrayLike | None = None,
     refine: bool = True,
-    loss: LossName = "squared",
-    loss_scale: float = 0.05,
+    loss: Literal["auto", "squared", "linear", "huber", "cauchy"] = "auto",
+    loss_scale: float | None = None,
     min_inliers: int = 50,
     max_iterations: int = 100,
 ) -> CalibrationResult: ...
@@ -312,6 +312,9 @@ def sim_corner_scene(
     extra_walls: int = 0,
     noise: float | None = None,
     dropout: float = 0.0,
+    wall_angle_deg: float = 90.0,
+    target_tilt_deg: float = 10.0,
+    target_relative_yaw_deg: float | None = None,
 ) -> Scene: ...
 def sim_poles_scene(
     model: str | BeamModel | None = None,

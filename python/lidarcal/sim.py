@@ -147,10 +147,16 @@ def corner_scene(
     extra_walls: int = 0,
     noise: float | None = None,
     dropout: float = 0.0,
+    wall_angle_deg: float = 90.0,
+    target_tilt_deg: float = 10.0,
+    target_relative_yaw_deg: float | None = None,
 ) -> Scene:
     """A building corner (two walls and the ground) scanned by two spinning LiDARs.
 
     ``scene.planes`` holds wall 1, wall 2, the ground and any extra walls in the reference frame.
+    ``wall_angle_deg`` is the angle between the walls (90 makes a cube corner with the ground,
+    which the planar method can only match with ``up``); the target sensor is tilted by up to
+    ``target_tilt_deg`` and turned by ``target_relative_yaw_deg`` (random when None).
 
     >>> scene = corner_scene("vlp16", seed=0, clutter_boxes=0)
     >>> scene.planes.shape
@@ -163,6 +169,9 @@ def corner_scene(
         extra_walls=extra_walls,
         noise=noise,
         dropout=dropout,
+        wall_angle_deg=wall_angle_deg,
+        target_tilt_deg=target_tilt_deg,
+        target_relative_yaw_deg=target_relative_yaw_deg,
     )
 
 

@@ -32,6 +32,7 @@ pub const DEGENERACY_RATIO: f64 = 1e-12;
 pub struct Moments {
     origin: Vector3<f64>,
     count: usize,
+    weight: f64,
     sum: Vector3<f64>,
     outer: Matrix3<f64>,
 }
@@ -43,6 +44,7 @@ impl Moments {
         Moments {
             origin: origin.coords,
             count: 0,
+            weight: 0.0,
             sum: Vector3::zeros(),
             outer: Matrix3::zeros(),
         }
@@ -62,10 +64,17 @@ impl Moments {
     /// Adds one point.
     #[inline]
     pub fn add(&mut self, p: &Point3<f64>) {
+        self.add_weighted(p, 1.0);
+    }
+
+    /// Adds one point with weight `w >= 0` (all statistics become weighted sums).
+    #[inline]
+    pub fn add_weighted(&mut self, p: &Point3<f64>, w: f64) {
         let d = p.coords - self.origin;
         self.count += 1;
-        self.sum += d;
-        self.outer += d * d.transpose();
+        self.weight += w;
+        self.sum += d * w;
+        self.outer += d * d.transpose() * w;
     }
 
     /// Number of points.
@@ -73,17 +82,25 @@ impl Moments {
         self.count
     }
 
-    /// The mean point.
-    pub fn mean(&self) -> Point3<f64> {
-        Point3::from(self.origin + self.sum / self.count.max(1) as f64)
+    /// Total weight (the number of points when none was weighted).
+    pub fn weight(&self) -> f64 {
+        self.weight
     }
 
-    /// The scatter matrix `sum (p - mean)(p - mean)^T`.
+    /// The (weighted) mean point.
+    pub fn mean(&self) -> Point3<f64> {
+        if self.weight <= 0.0 {
+            return Point3::from(self.origin);
+        }
+        Point3::from(self.origin + self.sum / self.weight)
+    }
+
+    /// The (weighted) scatter matrix `sum w (p - mean)(p - mean)^T`.
     pub fn scatter(&self) -> Matrix3<f64> {
-        if self.count == 0 {
+        if self.weight <= 0.0 {
             return Matrix3::zeros();
         }
-        let m = self.sum / self.count as f64;
+        let m = self.sum / self.weight;
         self.outer - m * self.sum.transpose()
     }
 
@@ -115,7 +132,7 @@ impl Moments {
         let plane = Plane::from_point_normal(&self.mean(), &normal)?;
         Ok(PlaneFit {
             plane,
-            rms: (values[0] / self.count as f64).sqrt(),
+            rms: (values[0] / self.weight).sqrt(),
             eigenvalues: values,
         })
     }
@@ -137,7 +154,7 @@ impl Moments {
         let line = Line::new(self.mean(), vectors[2])?;
         Ok(LineFit {
             line,
-            rms: ((values[0] + values[1]) / self.count as f64).sqrt(),
+            rms: ((values[0] + values[1]) / self.weight).sqrt(),
             eigenvalues: values,
         })
     }

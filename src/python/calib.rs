@@ -232,10 +232,12 @@ fn up_arg(up: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(Vector3<f64>, Vecto
 /// distance_threshold: plane inlier distance in metres; None estimates 3 sigma of each cloud's noise.
 /// up: gravity direction, (3,) for both frames or (2, 3) [reference, target]; used only to break
 ///     a tie between plane correspondences (e.g. a cube corner).
-/// refine: run the Levenberg–Marquardt refinement. loss: "squared", "huber" or "cauchy".
+/// refine: run the Levenberg–Marquardt refinement. loss: "auto" (Cauchy at the estimated noise
+///     level, threshold / 3), "squared" (fastest: exact per-plane statistics), "huber" or
+///     "cauchy" with loss_scale in metres.
 /// Raises CalibrationError with the reason when no trustworthy result exists.
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, seed=0, up=None, refine=true, loss="squared", loss_scale=0.05, min_inliers=50, max_iterations=100))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, seed=0, up=None, refine=true, loss="auto", loss_scale=None, min_inliers=50, max_iterations=100))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_planes(
     py: Python<'_>,
@@ -246,19 +248,29 @@ fn calibrate_planes(
     up: Option<&Bound<'_, PyAny>>,
     refine: bool,
     loss: &str,
-    loss_scale: f64,
+    loss_scale: Option<f64>,
     min_inliers: usize,
     max_iterations: usize,
 ) -> PyResult<CalibrationResult> {
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;
+    let needs_scale = |name: &str| {
+        loss_scale.ok_or_else(|| {
+            PyValueError::new_err(format!("loss={name:?} needs loss_scale (metres)"))
+        })
+    };
     let loss = match loss {
-        "squared" | "linear" => Loss::Squared,
-        "huber" => Loss::Huber { delta: loss_scale },
-        "cauchy" => Loss::Cauchy { scale: loss_scale },
+        "auto" => None,
+        "squared" | "linear" => Some(Loss::Squared),
+        "huber" => Some(Loss::Huber {
+            delta: needs_scale("huber")?,
+        }),
+        "cauchy" => Some(Loss::Cauchy {
+            scale: needs_scale("cauchy")?,
+        }),
         other => {
             return Err(PyValueError::new_err(format!(
-                "loss must be 'squared', 'huber' or 'cauchy', got {other:?}"
+                "loss must be 'auto', 'squared', 'huber' or 'cauchy', got {other:?}"
             )))
         }
     };
@@ -271,7 +283,7 @@ fn calibrate_planes(
         min_inliers,
         lm: LmOptions {
             max_iterations,
-            ..LmOptions::default()
+            ..PlanarOptions::default().lm
         },
     };
     let inner = run(py, move || {

@@ -394,7 +394,8 @@ impl Scene {
 
 /// The building-corner scene.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, seed=0, clutter_boxes=4, extra_walls=0, noise=None, dropout=0.0))]
+#[pyo3(signature = (model=None, *, seed=0, clutter_boxes=4, extra_walls=0, noise=None, dropout=0.0, wall_angle_deg=90.0, target_tilt_deg=10.0, target_relative_yaw_deg=None))]
+#[allow(clippy::too_many_arguments)]
 fn sim_corner_scene<'py>(
     py: Python<'py>,
     model: Option<&Bound<'py, PyAny>>,
@@ -403,6 +404,9 @@ fn sim_corner_scene<'py>(
     extra_walls: usize,
     noise: Option<f64>,
     dropout: f64,
+    wall_angle_deg: f64,
+    target_tilt_deg: f64,
+    target_relative_yaw_deg: Option<f64>,
 ) -> PyResult<Scene> {
     let model = model_arg(model)?;
     let options = CornerOptions {
@@ -411,6 +415,9 @@ fn sim_corner_scene<'py>(
         extra_walls,
         range_noise: noise,
         dropout,
+        wall_angle_deg,
+        target_tilt_deg,
+        target_relative_yaw_deg,
     };
     let inner = run(py, move || corner_scene(&model, &options))?;
     Ok(Scene {
