@@ -61,3 +61,20 @@ def test_simulate_errors_exit_non_zero(tmp_path: Path) -> None:
     result = CliRunner().invoke(main, ["simulate", "--output", str(blocker / "sub")])
     assert result.exit_code != 0
     assert result.output.strip().startswith("Error:") or "Error" in result.output
+
+
+def test_demo_calibrates_a_simulated_corner() -> None:
+    from lidarcal.cli import main
+
+    runner = CliRunner()
+    result = runner.invoke(main, ["demo", "--seed", "2"])
+    assert result.exit_code == 0, result.output
+    assert "error     rotation" in result.output
+    out = runner.invoke(main, ["demo", "--seed", "2", "--json"])
+    assert out.exit_code == 0, out.output
+    report = json.loads(out.output)
+    assert report["rotation_error_deg"] < 0.1 and report["translation_error_m"] < 0.01
+    assert np.array(report["transform"]).shape == (4, 4) and report["converged"]
+    bad = runner.invoke(main, ["demo", "--wall-angle", "10"])
+    assert bad.exit_code != 0 and "wall_angle_deg must be in" in bad.output
+    assert "Traceback" not in bad.output
