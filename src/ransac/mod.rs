@@ -244,7 +244,8 @@ pub fn rms<E: Estimator>(
     (sum / indices.len() as f64).sqrt()
 }
 
-/// Indices of the points within `threshold` of `model` (strictly), ascending.
+/// Indices of the points within `threshold` of `model` (strictly), ascending. Parallel with the
+/// `parallel` feature; the order (and so the result) is the same for any thread count.
 pub fn inliers<E: Estimator>(
     estimator: &E,
     points: &[Point3<f64>],
@@ -252,10 +253,15 @@ pub fn inliers<E: Estimator>(
     threshold: f64,
 ) -> Vec<usize> {
     let t2 = threshold * threshold;
-    points
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| estimator.squared_distance(model, p) < t2)
-        .map(|(i, _)| i)
-        .collect()
+    let inside =
+        |(i, p): (usize, &Point3<f64>)| (estimator.squared_distance(model, p) < t2).then_some(i);
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        points.par_iter().enumerate().filter_map(inside).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        points.iter().enumerate().filter_map(inside).collect()
+    }
 }

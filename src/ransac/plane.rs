@@ -259,18 +259,29 @@ pub struct ExtractedPlane {
 /// Assigns each point to the only plane within `threshold` of it; points near none or near two
 /// or more planes (intersection lines) are left out.
 fn assign(points: &[Point3<f64>], planes: &[Plane], threshold: f64) -> Vec<Vec<usize>> {
-    let mut groups = vec![Vec::new(); planes.len()];
-    for (i, p) in points.iter().enumerate() {
-        let mut owner = None;
-        let mut near = 0;
+    let owner = |p: &Point3<f64>| {
+        let mut found = None;
         for (j, plane) in planes.iter().enumerate() {
             if plane.signed_distance(p).abs() < threshold {
-                near += 1;
-                owner = Some(j);
+                if found.is_some() {
+                    return None; // near two planes: an intersection line
+                }
+                found = Some(j);
             }
         }
-        if let (1, Some(j)) = (near, owner) {
-            groups[j].push(i);
+        found
+    };
+    #[cfg(feature = "parallel")]
+    let owners: Vec<Option<usize>> = {
+        use rayon::prelude::*;
+        points.par_iter().map(owner).collect()
+    };
+    #[cfg(not(feature = "parallel"))]
+    let owners: Vec<Option<usize>> = points.iter().map(owner).collect();
+    let mut groups = vec![Vec::new(); planes.len()];
+    for (i, o) in owners.into_iter().enumerate() {
+        if let Some(group) = o.and_then(|j| groups.get_mut(j)) {
+            group.push(i);
         }
     }
     groups
