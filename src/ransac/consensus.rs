@@ -4,7 +4,12 @@ use nalgebra::Point3;
 
 use super::sampler::draw_batch;
 use super::{inliers, rms, Cloud, Estimator, RansacOptions, RansacResult};
-use crate::error::{Error, Result};
+use crate::error::{ensure_finite, Error, Result};
+
+/// Most points the hypothesis search (scoring, local optimisation, adaptive stopping) runs on.
+/// Larger clouds are searched on a fixed-stride subset: the inlier ratio, and so the ranking of
+/// hypotheses, is the same; the final support and least-squares refit use every point.
+pub const MAX_SEARCH_POINTS: usize = 32_768;
 
 /// Hypotheses per batch. Fixed, so the sequence of batches (and the result) never depends on the
 /// number of threads; large enough to keep both cores busy, small enough that adaptive stopping
@@ -133,8 +138,20 @@ pub fn ransac<E: Estimator>(
             E::NAME
         )));
     }
-    let cloud = Cloud::new(points)?;
-    estimator.check_cloud(points)?;
+    ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+    // The search runs on at most MAX_SEARCH_POINTS points (a fixed stride through the cloud); the
+    // final support and least-squares refit use every point.
+    let stride = n.div_ceil(MAX_SEARCH_POINTS).max(1);
+    let subset: Vec<Point3<f64>>;
+    let search: &[Point3<f64>] = if stride > 1 {
+        subset = points.iter().step_by(stride).copied().collect();
+        &subset
+    } else {
+        points
+    };
+    let n_search = search.len();
+    let cloud = Cloud::new(search)?;
+    estimator.check_cloud(search)?;
     let threshold = options.distance_threshold;
 
     let mut best: Option<(E::Model, Score)> = None;
@@ -143,19 +160,19 @@ pub fn ransac<E: Estimator>(
     let mut batch = 0u64;
     while drawn < required {
         let len = BATCH.min(options.max_iterations - drawn);
-        let samples = draw_batch(options.seed, batch, len, s, n);
+        let samples = draw_batch(options.seed, batch, len, s, n_search);
         batch += 1;
         drawn += len;
         let models: Vec<E::Model> = samples
             .chunks_exact(s)
-            .filter_map(|sample| estimator.minimal_model(points, sample))
+            .filter_map(|sample| estimator.minimal_model(search, sample))
             .collect();
         if models.is_empty() {
             continue;
         }
         let scores = score_models(estimator, &cloud, &models, threshold, false);
         scored += models.len();
-        point_tests += (models.len() * n) as u64;
+        point_tests += (models.len() * n_search) as u64;
         // The batch's best: lowest cost, the earliest hypothesis on ties.
         let mut k_best = 0;
         for (k, sc) in scores.iter().enumerate() {
@@ -175,7 +192,7 @@ pub fn ransac<E: Estimator>(
             );
             required = required_hypotheses(
                 improved.1.inliers,
-                n,
+                n_search,
                 s,
                 options.confidence,
                 options.max_iterations,

@@ -13,7 +13,9 @@
 //!   when the number of hypotheses reaches `log(1 - confidence) / log(1 - w^s)` for inlier ratio
 //!   `w` and sample size `s`; a final least-squares refit gives the returned model.
 //!
-//! Scoring runs on a structure-of-arrays copy of the cloud in `f32`, centred on its bounding-box
+//! The search runs on at most [`consensus::MAX_SEARCH_POINTS`] points (a fixed stride through a
+//! larger cloud, which keeps its inlier ratio); the returned model is refitted on, and its inliers
+//! counted over, every point. Scoring runs on a structure-of-arrays copy of the searched points in `f32`, centred on its bounding-box
 //! midpoint so that `f32` keeps sub-millimetre resolution far from the sensor; fits use the
 //! original `f64` points. The MSAC cost of a model is `sum_i min(d_i^2, t^2)` (truncated quadratic)
 //! with `d_i` the point's distance and `t` the threshold; inliers are the points with `d_i < t`.
