@@ -86,7 +86,7 @@ pub struct PlanarOptions {
     pub up: Option<(Vector3<f64>, Vector3<f64>)>,
     /// Run the Levenberg–Marquardt refinement (otherwise return the closed-form result).
     pub refine: bool,
-    /// Loss of the refinement; `None` is Cauchy at the noise level (the larger threshold / 3),
+    /// Loss of the refinement; `None` is Cauchy at the noise level (1/3 of the larger threshold),
     /// which keeps clutter inside the inlier bands from biasing the fit. `Some(Loss::Squared)`
     /// runs on the exact sufficient statistics and is the fastest.
     pub loss: Option<Loss>,
@@ -253,10 +253,18 @@ fn right_handed(mut planes: Vec<ExtractedPlane>) -> Vec<ExtractedPlane> {
     planes
 }
 
+/// Scale of the default Cauchy loss relative to the inlier threshold (3 sigma): 1 sigma. On the
+/// seed's protocol it gives a mean rotation error of 1.49 mrad against 1.52 at 1.5 sigma and 1.54
+/// at 2 sigma; the wider scales converge in fewer reweighting rounds (about half at 2 sigma on a
+/// 64-beam scan) and are available through `loss`.
+pub const DEFAULT_CAUCHY_SCALE: f64 = 1.0 / 3.0;
 /// Most re-weighting rounds of the robust refinement.
 pub const IRLS_MAX_ROUNDS: usize = 50;
-/// The robust refinement stops when a round moves the pose by less than this (tangent norm:
-/// 10 nm, 0.01 micro-radian).
+/// The robust refinement stops when a round moves the pose by less than this fraction of the
+/// pose's own standard deviation (the smallest of the six, from the least-squares covariance):
+/// iterating further changes nothing that the data can tell apart.
+pub const IRLS_RELATIVE_STEP: f64 = 1e-3;
+/// ... or, whatever the covariance, by less than this (tangent norm: 10 nm, 0.01 micro-radian).
 pub const IRLS_STEP_TOLERANCE: f64 = 1e-8;
 
 /// Robust refinement by iteratively reweighted least squares on weighted sufficient statistics:
@@ -265,6 +273,17 @@ pub const IRLS_STEP_TOLERANCE: f64 = 1e-8;
 /// cost, the same estimate a robust Levenberg–Marquardt reaches, at a fraction of the passes
 /// over the points. The report is the last round's, with the robust cost at the start and end.
 fn irls(problem: &PointToPlane, start: &LmSolution, lm: &LmOptions) -> Result<LmSolution> {
+    let smallest_sd = start
+        .report
+        .covariance()
+        .map(|c| {
+            c.diagonal()
+                .iter()
+                .fold(f64::INFINITY, |m, &v| m.min(v.max(0.0).sqrt()))
+        })
+        .filter(|sd| sd.is_finite())
+        .unwrap_or(0.0);
+    let tolerance = (IRLS_RELATIVE_STEP * smallest_sd).max(IRLS_STEP_TOLERANCE);
     let mut solution = *start;
     let mut iterations = start.report.iterations;
     let mut converged = false;
@@ -274,7 +293,7 @@ fn irls(problem: &PointToPlane, start: &LmSolution, lm: &LmOptions) -> Result<Lm
         iterations += next.report.iterations;
         let step = se3_log(&(next.pose * solution.pose.inverse())).norm();
         solution = next;
-        if step < IRLS_STEP_TOLERANCE {
+        if step < tolerance {
             converged = true;
             break;
         }
@@ -496,7 +515,7 @@ pub fn calibrate_planes(
     let moments_problem = PlaneMomentsProblem::new(moment_groups)?;
 
     let loss = options.loss.unwrap_or(Loss::Cauchy {
-        scale: thresholds[0].max(thresholds[1]) / 3.0,
+        scale: DEFAULT_CAUCHY_SCALE * thresholds[0].max(thresholds[1]),
     });
     let (pose, report) = if options.refine {
         // The exact least-squares solution on the sufficient statistics costs microseconds; a
@@ -615,21 +634,20 @@ mod tests {
         .unwrap();
         let via_irls = irls(&problem, &start, &lm).unwrap();
         assert!(via_irls.report.converged());
+        // IRLS stops once a round moves the pose by less than 1e-3 of its smallest standard
+        // deviation: the two estimates must agree far inside the statistical uncertainty.
         let gap = se3_log(&(via_irls.pose * direct.pose.inverse())).norm();
-        assert!(gap < 1e-7, "IRLS and LM differ by {gap}");
-        // The robust cost's gradient vanishes there (relative to where the solve started).
-        let at_start = problem
-            .normal_equations(&Isometry3::identity(), true)
-            .gradient
-            .amax();
-        let at_end = problem
-            .normal_equations(&via_irls.pose, true)
-            .gradient
-            .amax();
-        // Measured 4.4e-7: the rounds stop once a step is below 1e-8.
+        let smallest_sd = direct
+            .report
+            .covariance()
+            .unwrap()
+            .diagonal()
+            .iter()
+            .fold(f64::INFINITY, |m, &v| m.min(v.sqrt()));
+        eprintln!("IRLS vs LM: gap {gap:.3e}, smallest sd {smallest_sd:.3e}");
         assert!(
-            at_end < 1e-6 * at_start,
-            "gradient {at_end} vs {at_start} at the start"
+            gap < 1e-2 * smallest_sd,
+            "IRLS and LM differ by {gap} (smallest sd {smallest_sd})"
         );
     }
 

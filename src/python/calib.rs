@@ -233,7 +233,7 @@ fn up_arg(up: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(Vector3<f64>, Vecto
 /// up: gravity direction, (3,) for both frames or (2, 3) [reference, target]; used only to break
 ///     a tie between plane correspondences (e.g. a cube corner).
 /// refine: run the Levenberg–Marquardt refinement. loss: "auto" (Cauchy at the estimated noise
-///     level, threshold / 3), "squared" (fastest: exact per-plane statistics), "huber" or
+///     level, 1/3 of the threshold), "squared" (fastest: exact per-plane statistics), "huber" or
 ///     "cauchy" with loss_scale in metres.
 /// Raises CalibrationError with the reason when no trustworthy result exists.
 #[pyfunction]
