@@ -39,6 +39,7 @@
 //! ```
 
 pub mod consensus;
+pub mod kernel;
 pub mod line;
 pub mod plane;
 pub mod sampler;

@@ -11,6 +11,7 @@
 use nalgebra::Point3;
 
 use super::consensus::{ransac, Score, GROUP};
+use super::kernel;
 use super::{Cloud, Estimator, RansacOptions, RansacResult};
 use crate::error::{ensure_finite, Error, Result};
 use crate::fit::Moments;
@@ -19,63 +20,14 @@ use crate::geometry::Plane;
 /// A sample is degenerate when the sine of the angle between its two edges is below this.
 pub const MIN_SAMPLE_SINE: f64 = 1e-6;
 
-/// Points per lane-accumulator block in the kernels: `f32` partial sums are flushed to `f64`
-/// every block, bounding their rounding error.
-const BLOCK: usize = 1024;
-/// SIMD-friendly lane count of the kernels' accumulators.
-const LANES: usize = 8;
-
 /// The 3-point plane estimator.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PlaneEstimator;
 
 /// MSAC scores of up to [`GROUP`] planes (centred `f32` coefficients `[a, b, c, d]`) over the
-/// structure-of-arrays cloud, in one pass.
+/// structure-of-arrays cloud, in one pass (see [`super::kernel`]).
 pub fn score_planes_f32(
-    count: bool,
-    x: &[f32],
-    y: &[f32],
-    z: &[f32],
-    models: &[[f32; 4]],
-    threshold: f32,
-    out: &mut [Score],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2, checked just above.
-        unsafe { score_planes_f32_avx2(count, x, y, z, models, threshold, out) };
-        return;
-    }
-    if count {
-        score_planes_f32_impl::<true>(x, y, z, models, threshold, out)
-    } else {
-        score_planes_f32_impl::<false>(x, y, z, models, threshold, out)
-    }
-}
-
-/// The same kernel compiled for AVX2 (8 lanes per instruction). FMA is deliberately not enabled:
-/// every lane performs the same operations in the same order as the baseline build, so results
-/// are bit-identical on machines with and without AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn score_planes_f32_avx2(
-    count: bool,
-    x: &[f32],
-    y: &[f32],
-    z: &[f32],
-    models: &[[f32; 4]],
-    threshold: f32,
-    out: &mut [Score],
-) {
-    if count {
-        score_planes_f32_impl::<true>(x, y, z, models, threshold, out)
-    } else {
-        score_planes_f32_impl::<false>(x, y, z, models, threshold, out)
-    }
-}
-
-#[inline(always)]
-fn score_planes_f32_impl<const COUNT: bool>(
+    count_inliers: bool,
     x: &[f32],
     y: &[f32],
     z: &[f32],
@@ -83,63 +35,19 @@ fn score_planes_f32_impl<const COUNT: bool>(
     threshold: f32,
     out: &mut [Score],
 ) {
-    let count = planes.len().min(GROUP).min(out.len());
-    let mut coeffs = [[0f32; 4]; GROUP];
-    coeffs[..count].copy_from_slice(&planes[..count]);
-    let t2 = threshold * threshold;
-    let mut total_cost = [0f64; GROUP];
-    let mut total_inliers = [0usize; GROUP];
-    let n = x.len().min(y.len()).min(z.len());
-    for start in (0..n).step_by(BLOCK) {
-        let end = (start + BLOCK).min(n);
-        let (xb, yb, zb) = (&x[start..end], &y[start..end], &z[start..end]);
-        let mut cost = [[0f32; LANES]; GROUP];
-        let mut hits = [[0u32; LANES]; GROUP];
-        let mut xc = xb.chunks_exact(LANES);
-        let mut yc = yb.chunks_exact(LANES);
-        let mut zc = zb.chunks_exact(LANES);
-        for ((xs, ys), zs) in (&mut xc).zip(&mut yc).zip(&mut zc) {
-            for k in 0..GROUP {
-                let [a, b, c, d] = coeffs[k];
-                for l in 0..LANES {
-                    let dist = a * xs[l] + b * ys[l] + c * zs[l] + d;
-                    let d2 = dist * dist;
-                    let inside = d2 < t2;
-                    cost[k][l] += if inside { d2 } else { t2 };
-                    if COUNT {
-                        hits[k][l] += inside as u32;
-                    }
-                }
-            }
-        }
-        for ((xs, ys), zs) in xc
-            .remainder()
-            .iter()
-            .zip(yc.remainder())
-            .zip(zc.remainder())
-        {
-            for k in 0..GROUP {
-                let [a, b, c, d] = coeffs[k];
-                let dist = a * xs + b * ys + c * zs + d;
-                let d2 = dist * dist;
-                let inside = d2 < t2;
-                cost[k][0] += if inside { d2 } else { t2 };
-                if COUNT {
-                    hits[k][0] += inside as u32;
-                }
-            }
-        }
-        for k in 0..GROUP {
-            total_cost[k] += cost[k].iter().map(|&c| f64::from(c)).sum::<f64>();
-            total_inliers[k] += hits[k].iter().map(|&h| h as usize).sum::<usize>();
-        }
-    }
-    for k in 0..count {
-        out[k] = Score {
-            cost: total_cost[k],
-            inliers: total_inliers[k],
-        };
-    }
+    kernel::score(
+        count_inliers,
+        x,
+        y,
+        z,
+        planes,
+        threshold,
+        out,
+        |m, px, py, pz| {
+            let dist = m[0] * px + m[1] * py + m[2] * pz + m[3];
+            dist * dist
+        },
+    );
 }
 
 /// A plane's coefficients in the cloud's centred `f32` frame.
