@@ -257,20 +257,77 @@ fn refine_point_to_plane(
         .iter()
         .map(|c| Plane::from_coefficients(&Vector4::from_column_slice(c)))
         .collect::<crate::Result<Vec<_>>>()?;
-    let groups = groups_arg(points, frames, planes.len())?;
-    let initial = initial_arg(initial_transform)?;
-    let loss = loss_arg(loss, loss_scale)?;
-    let groups = planes
+    let options = RefineArgs::parse(
+        points,
+        planes.len(),
+        initial_transform,
+        frames,
+        loss,
+        loss_scale,
+    )?;
+    refine(py, options, planes, max_iterations, |groups, loss| {
+        let groups = groups
+            .into_iter()
+            .map(|(plane, points, frame)| PlaneGroup {
+                plane,
+                points,
+                frame,
+            })
+            .collect();
+        PointToPlane::new(groups, loss)
+    })
+}
+
+/// The arguments the refine functions share, checked.
+struct RefineArgs {
+    groups: Vec<(Vec<Point3<f64>>, Frame)>,
+    initial: Isometry3<f64>,
+    loss: Loss,
+}
+
+impl RefineArgs {
+    fn parse(
+        points: &Bound<'_, PyAny>,
+        count: usize,
+        initial_transform: Option<&Bound<'_, PyAny>>,
+        frames: Option<Vec<String>>,
+        loss: &str,
+        loss_scale: f64,
+    ) -> PyResult<Self> {
+        Ok(RefineArgs {
+            groups: groups_arg(points, frames, count)?,
+            initial: initial_arg(initial_transform)?,
+            loss: loss_arg(loss, loss_scale)?,
+        })
+    }
+}
+
+/// Pairs each feature with its points and frame, builds the problem and solves it with the GIL
+/// released.
+fn refine<T, P, B>(
+    py: Python<'_>,
+    args: RefineArgs,
+    features: Vec<T>,
+    max_iterations: usize,
+    build: B,
+) -> PyResult<RefineResult>
+where
+    T: Send,
+    P: lm::LeastSquaresProblem,
+    B: FnOnce(Vec<(T, Vec<Point3<f64>>, Frame)>, Loss) -> crate::Result<P> + Send,
+{
+    let RefineArgs {
+        groups,
+        initial,
+        loss,
+    } = args;
+    let groups: Vec<(T, Vec<Point3<f64>>, Frame)> = features
         .into_iter()
         .zip(groups)
-        .map(|(plane, (points, frame))| PlaneGroup {
-            plane,
-            points,
-            frame,
-        })
+        .map(|(feature, (points, frame))| (feature, points, frame))
         .collect();
     let solution = run(py, move || {
-        let problem = PointToPlane::new(groups, loss)?;
+        let problem = build(groups, loss)?;
         lm::solve(&problem, &initial, &lm_options(max_iterations))
     })?;
     Ok(RefineResult {
@@ -279,7 +336,8 @@ fn refine_point_to_plane(
     })
 }
 
-fn line_from_row(row: &[f64]) -> crate::Result<Line> {
+/// A line from a row `[px, py, pz, dx, dy, dz]`.
+pub(crate) fn line_from_row(row: &[f64]) -> crate::Result<Line> {
     Line::new(
         Point3::new(row[0], row[1], row[2]),
         Vector3::new(row[3], row[4], row[5]),
@@ -307,25 +365,24 @@ fn refine_point_to_line(
         .iter()
         .map(|r| line_from_row(r))
         .collect::<crate::Result<Vec<_>>>()?;
-    let groups = groups_arg(points, frames, lines.len())?;
-    let initial = initial_arg(initial_transform)?;
-    let loss = loss_arg(loss, loss_scale)?;
-    let groups = lines
-        .into_iter()
-        .zip(groups)
-        .map(|(line, (points, frame))| LineGroup {
-            line,
-            points,
-            frame,
-        })
-        .collect();
-    let solution = run(py, move || {
-        let problem = PointToLine::new(groups, loss)?;
-        lm::solve(&problem, &initial, &lm_options(max_iterations))
-    })?;
-    Ok(RefineResult {
-        pose: solution.pose,
-        report: solution.report,
+    let options = RefineArgs::parse(
+        points,
+        lines.len(),
+        initial_transform,
+        frames,
+        loss,
+        loss_scale,
+    )?;
+    refine(py, options, lines, max_iterations, |groups, loss| {
+        let groups = groups
+            .into_iter()
+            .map(|(line, points, frame)| LineGroup {
+                line,
+                points,
+                frame,
+            })
+            .collect();
+        PointToLine::new(groups, loss)
     })
 }
 
