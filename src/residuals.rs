@@ -82,16 +82,30 @@ pub struct LineGroup {
     pub frame: Frame,
 }
 
-fn check_points(kind: &str, index: usize, points: &[Point3<f64>]) -> Result<()> {
-    if points.is_empty() {
-        return Err(Error::InvalidInput(format!(
-            "{kind} group {index} has no points"
-        )));
+/// Checks the loss and every group (non-empty, finite points); returns the number of points.
+fn checked_count<'a>(
+    kind: &str,
+    loss: Loss,
+    groups: impl ExactSizeIterator<Item = &'a [Point3<f64>]>,
+) -> Result<usize> {
+    loss.validate()?;
+    if groups.len() == 0 {
+        return Err(Error::InvalidInput(format!("no {kind} groups given")));
     }
-    ensure_finite(
-        &format!("points of {kind} group {index}"),
-        points.iter().flat_map(|p| p.coords.iter()),
-    )
+    let mut count = 0;
+    for (index, points) in groups.enumerate() {
+        if points.is_empty() {
+            return Err(Error::InvalidInput(format!(
+                "{kind} group {index} has no points"
+            )));
+        }
+        ensure_finite(
+            &format!("points of {kind} group {index}"),
+            points.iter().flat_map(|p| p.coords.iter()),
+        )?;
+        count += points.len();
+    }
+    Ok(count)
 }
 
 /// Point-to-plane alignment: `sum rho(r^2)` over every point of every group.
@@ -105,14 +119,7 @@ pub struct PointToPlane {
 impl PointToPlane {
     /// Builds the problem; fails on empty groups, non-finite points or an invalid loss.
     pub fn new(groups: Vec<PlaneGroup>, loss: Loss) -> Result<Self> {
-        loss.validate()?;
-        if groups.is_empty() {
-            return Err(Error::InvalidInput("no plane groups given".into()));
-        }
-        for (i, g) in groups.iter().enumerate() {
-            check_points("plane", i, &g.points)?;
-        }
-        let count = groups.iter().map(|g| g.points.len()).sum();
+        let count = checked_count("plane", loss, groups.iter().map(|g| g.points.as_slice()))?;
         Ok(PointToPlane {
             groups,
             loss,
@@ -348,14 +355,7 @@ pub struct PointToLine {
 impl PointToLine {
     /// Builds the problem; fails on empty groups, non-finite points or an invalid loss.
     pub fn new(groups: Vec<LineGroup>, loss: Loss) -> Result<Self> {
-        loss.validate()?;
-        if groups.is_empty() {
-            return Err(Error::InvalidInput("no line groups given".into()));
-        }
-        for (i, g) in groups.iter().enumerate() {
-            check_points("line", i, &g.points)?;
-        }
-        let count = groups.iter().map(|g| g.points.len()).sum();
+        let count = checked_count("line", loss, groups.iter().map(|g| g.points.as_slice()))?;
         Ok(PointToLine {
             groups,
             loss,
