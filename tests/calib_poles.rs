@@ -66,6 +66,12 @@ fn explore() {
                             )
                         })
                         .collect();
+                    println!(
+                        "n {} {} {:?}",
+                        scene.reference.len(),
+                        scene.target.len(),
+                        r.timings.stages
+                    );
                     println!("seed {seed} r {radius:.3} {fit:?}: rot {:.4} trans {:.4} margin {:.2} ms {:.1} | {}", er, et, r.margin, r.timings.total(), scores.join(" "));
                 }
                 Err(e) => println!("seed {seed} {fit:?}: ERR {e}"),

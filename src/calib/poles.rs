@@ -317,8 +317,10 @@ pub struct PoleCalibration {
     pub margin: f64,
     /// The margin is below [`AMBIGUITY_MARGIN`].
     pub ambiguous: bool,
-    /// RMS point-to-axis residual at the result (metres).
+    /// RMS point-to-axis residual at the result (metres), all poles and both directions.
     pub rmse: f64,
+    /// The same per matched pole.
+    pub pole_rmse: Vec<f64>,
     /// The chosen hypothesis's refinement report.
     pub report: Option<LmReport>,
     /// Covariance of the left-perturbation tangent `[rho; phi]` (least-squares loss).
@@ -968,6 +970,7 @@ pub fn calibrate_poles(
         indices_reference.push(pr.indices.clone());
         indices_target.push(pt.indices.clone());
     }
+    let pole_rmse = per_pole_rms(&clouds, &best.matches, options.loss, &pose)?;
     let report = reports[chosen];
     let covariance = report.as_ref().and_then(|r| r.covariance());
     let rmse = best.axis_rms;
@@ -987,10 +990,36 @@ pub fn calibrate_poles(
         chosen,
         margin,
         rmse,
+        pole_rmse,
         report,
         covariance,
         timings: clock.finish(),
     })
+}
+
+fn per_pole_rms(
+    clouds: &Clouds<'_>,
+    matches: &[(usize, usize, i8)],
+    loss: Loss,
+    pose: &Isometry3<f64>,
+) -> Result<Vec<f64>> {
+    let problem = point_to_axis_problem(clouds, matches, loss)?;
+    let residuals = problem.residuals(pose);
+    let mut out = Vec::with_capacity(matches.len());
+    let mut start = 0;
+    let sizes: Vec<usize> = problem.groups().iter().map(|g| g.points.len()).collect();
+    for pair in sizes.chunks(2) {
+        let n: usize = pair.iter().sum();
+        let sum: f64 = residuals
+            .get(start..start + n)
+            .unwrap_or(&[])
+            .iter()
+            .map(|(v, _)| v[0] * v[0] + v[1] * v[1])
+            .sum();
+        out.push((sum / n.max(1) as f64).sqrt());
+        start += n;
+    }
+    Ok(out)
 }
 
 fn base_pair(poles: &[DetectedPole]) -> Option<(usize, usize)> {
