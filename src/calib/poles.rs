@@ -19,7 +19,10 @@
 //!    its extent along the principal axis is at least [`PoleOptions::min_length`], and it is
 //!    elongated: `sqrt(l3 / l2)` of its scatter eigenvalues is at least
 //!    [`PoleOptions::min_elongation`]. A road sign or any compact bright blob (`l3 ~ l2`) fails
-//!    the last test and is reported among the rejected clusters.
+//!    the last test and is reported among the rejected clusters. A cluster that fails but is at
+//!    least [`SPLIT_MIN_LENGTH`] long (poles leaning on each other, an X) is split by sequential
+//!    RANSAC lines, each piece tested again. The cylinder fit must then have an RMS below
+//!    [`MAX_CYLINDER_RMS`] and a diameter below the pole's length.
 //! 4. **Axis.** A RANSAC line ([`crate::ransac::line::ransac_line`], threshold `1.2 r + 3 cm`, or
 //!    `3 sqrt(l2) + 3 cm` when the radius is unknown) drops stray points, then
 //!    [`fit_cylinder`] finds the axis by Levenberg–Marquardt on `dist(x, axis) - r` from the sensor's
@@ -121,6 +124,10 @@ pub const MIN_INTENSITY_GAP: f64 = 0.1;
 pub const MAX_CYLINDER_RMS: f64 = 0.03;
 /// Line inlier distance when splitting a merged cluster with an unknown radius (metres).
 pub const SPLIT_LINE_THRESHOLD: f64 = 0.2;
+/// Shortest cluster that is split into several lines (metres): crossing poles, not a sign.
+pub const SPLIT_MIN_LENGTH: f64 = 1.0;
+/// Smallest elongation of each piece of a split cluster.
+pub const SPLIT_MIN_ELONGATION: f64 = 3.0;
 /// Largest accepted estimated radius (metres).
 pub const MAX_RADIUS: f64 = 1.0;
 /// A further pole matches a mapped pole when their directions are within this angle (radians,
@@ -219,7 +226,7 @@ impl Default for PoleOptions {
             cluster_tolerance: 0.5,
             min_points: 15,
             min_length: 0.4,
-            min_elongation: 2.5,
+            min_elongation: 1.6,
             max_poles: 6,
             axis_fit: AxisFit::Cylinder,
             overlap_distance: 0.3,
@@ -503,8 +510,9 @@ pub fn extract_poles(
 }
 
 /// Sequential RANSAC lines in a cluster that failed the pole test as a whole (poles crossing or
-/// touching); every line's inliers must pass the pole test on their own. Only clusters of at
-/// least two poles' worth of points are split.
+/// touching); every line's inliers must pass the pole test on their own with an elongation of at
+/// least [`SPLIT_MIN_ELONGATION`]. Only clusters of at least two poles' worth of points and
+/// [`SPLIT_MIN_LENGTH`] are split, so a compact sign stays whole and is rejected.
 fn split_cluster(
     members: &[Point3<f64>],
     indices: &[usize],
@@ -514,6 +522,26 @@ fn split_cluster(
     if members.len() < 2 * options.min_points {
         return out;
     }
+    // Only a cluster at least as long as a pole can hold crossing poles; a sign is not split.
+    let moments = Moments::from_points(members);
+    let (_, vectors) = moments.principal_axes();
+    let mean = moments.mean();
+    let (lo, hi) = members
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            let s = (p - mean).dot(&vectors[2]);
+            (lo.min(s), hi.max(s))
+        });
+    if hi - lo < SPLIT_MIN_LENGTH {
+        return out;
+    }
+    // Each piece must be clearly a line on its own.
+    let strict = PoleOptions {
+        min_elongation: options.min_elongation.max(SPLIT_MIN_ELONGATION),
+        min_length: options.min_length.max(0.5 * SPLIT_MIN_LENGTH),
+        ..*options
+    };
+    let options = &strict;
     let threshold = options
         .pole_radius
         .map_or(SPLIT_LINE_THRESHOLD, |r| 1.2 * r + 0.03);
@@ -619,6 +647,12 @@ fn fit_pole(
                 return Err(format!(
                     "not a cylinder: RMS {:.3} m > {MAX_CYLINDER_RMS} m",
                     fit.rms
+                ));
+            }
+            if 2.0 * fit.radius > length {
+                return Err(format!(
+                    "wider than long: radius {:.3} m for a length of {length:.2} m",
+                    fit.radius
                 ));
             }
             if !(fit.radius > 0.0 && fit.radius <= MAX_RADIUS) {
