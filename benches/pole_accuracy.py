@@ -25,7 +25,10 @@ def errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
 
 def twenty_scenes() -> None:
     print("20 VLP-16 two-pole scenes, noise 0.006 m, random mounting (tilt <= 15 deg)")
-    print(f"{'seed':>4} {'radius':>6} | {'cylinder rot':>12} {'trans':>8} | {'line rot':>9} {'trans':>8}")
+    print(
+        f"{'seed':>4} {'radius':>6} | {'cylinder rot':>12} {'trans':>8} "
+        f"| {'line rot':>9} {'trans':>8}"
+    )
     results: dict[str, list[tuple[float, float]]] = {"cylinder": [], "line": []}
     for seed in range(20):
         radius = 0.05 + 0.10 * seed / 19
@@ -44,7 +47,10 @@ def twenty_scenes() -> None:
         (rc, tc), (rl, tl) = row
         print(f"{seed:>4} {radius:>6.3f} | {rc:>12.4f} {tc:>8.4f} | {rl:>9.4f} {tl:>8.4f}")
     print()
-    print(f"{'axis fit':>8} | {'ok (<0.05 rad, <0.1 m)':>22} | {'median rot':>10} | {'median trans':>12}")
+    print(
+        f"{'axis fit':>8} | {'ok (<0.05 rad, <0.1 m)':>22} "
+        f"| {'median rot':>10} | {'median trans':>12}"
+    )
     for fit, errs in results.items():
         rot = np.array([e[0] for e in errs])
         trans = np.array([e[1] for e in errs])

@@ -130,7 +130,6 @@ def calibrate_planes(
     min_inliers: int = 50,
     max_iterations: int = 100,
 ) -> CalibrationResult: ...
-
 def calibrate_poles(
     reference: ArrayLike,
     target: ArrayLike,

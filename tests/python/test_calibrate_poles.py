@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import lidarcal
-from lidarcal import sim
 import reference as ref
+from lidarcal import sim
 
 
 def errors(t_true: np.ndarray, t_est: np.ndarray) -> tuple[float, float]:
@@ -149,11 +149,11 @@ def test_errors() -> None:
     shifted = pole.copy()
     shifted[:, 1] += 2.5  # a copy of pole 1, 2.5 m aside: parallel
     parallel = np.vstack([one, shifted])
-    with pytest.raises(lidarcal.CalibrationError, match="parallel within 2.0 deg"):
+    with pytest.raises(lidarcal.CalibrationError, match=r"parallel within 2\.0 deg"):
         lidarcal.calibrate_poles(parallel, target, vendor="velodyne")
     nan = reference.copy()
     nan[[5, 9], 3] = np.nan
-    with pytest.raises(ValueError, match="2 NaN or infinite intensity value.*row 5"):
+    with pytest.raises(ValueError, match=r"2 NaN or infinite intensity value.*row 5"):
         lidarcal.calibrate_poles(nan, target)
     with pytest.raises(ValueError, match="vendor"):
         lidarcal.calibrate_poles(reference, target, vendor="acme")  # type: ignore[arg-type]
