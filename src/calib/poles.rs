@@ -105,7 +105,7 @@ pub const GROUND_OFFSET_SCALE: f64 = 0.2;
 /// Unit of the `1 - overlap` term.
 pub const OVERLAP_SCALE: f64 = 0.1;
 /// Target points (at most, by a fixed stride) used for the overlap term.
-pub const OVERLAP_SAMPLE: usize = 3000;
+pub const OVERLAP_SAMPLE: usize = 1500;
 /// Points (at most, by a fixed stride) used to find each cloud's largest plane.
 pub const GROUND_SAMPLE: usize = 3000;
 /// Inlier distance of the largest-plane search (metres).
