@@ -315,3 +315,44 @@ fn clear_errors() {
         Err(Error::InvalidInput(_))
     ));
 }
+
+#[test]
+fn a_symmetric_scene_is_refused() {
+    // Two poles leaning toward each other by 10 deg, mirror images under a 180 deg turn about the
+    // vertical between them, no ground, the sensors facing each other across them: the two scans
+    // are identical, so "same pose" and the true 180 deg turn (the pole swap) explain them equally
+    // well (same axis residual, full overlap). The calibration must refuse, not pick one.
+    let model = vlp16();
+    let (s, c) = 10f64.to_radians().sin_cos();
+    let mut shapes = Vec::new();
+    for (base, axis) in [
+        (Point3::new(5.0, -1.0, 0.0), Vector3::new(0.0, s, c)),
+        (Point3::new(5.0, 1.0, 0.0), Vector3::new(0.0, -s, c)),
+    ] {
+        let cyl = Cylinder::new(base, axis, 3.0, 0.1)
+            .unwrap()
+            .with_band(0.5, 2.5, IntensityRange::RETROREFLECTIVE)
+            .unwrap();
+        shapes.push(Shape::cylinder(cyl, POLE_PAINT));
+    }
+    let pose = |x: f64, yaw: f64| {
+        Isometry3::from_parts(
+            Translation3::new(x, 0.0, 1.5),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+        )
+    };
+    let options = ScanOptions {
+        seed: 2,
+        range_noise: Some(0.006),
+        dropout: 0.0,
+    };
+    let reference = scan(&model, &shapes, &pose(0.0, 0.0), &options).unwrap();
+    let target = scan(&model, &shapes, &pose(10.0, std::f64::consts::PI), &options).unwrap();
+    let (r, ri) = split(&reference);
+    let (t, ti) = split(&target);
+    let e = calibrate_poles(&r, &ri, &t, &ti, &velodyne()).unwrap_err();
+    assert!(
+        matches!(&e, Error::Calibration(m) if m.contains("ambiguous pole correspondence")),
+        "{e}"
+    );
+}

@@ -44,8 +44,9 @@
 //!    of the axes; four of the eight hypotheses fit the axes exactly. Each hypothesis gets a score
 //!    (lower is better), the sum of
 //!    * the RMS point-to-axis residual over [`AXIS_RMS_SCALE`];
-//!    * the angle between the reference's and the mapped target's largest plane (the ground in a
-//!      pole scene, both normals toward the sensors) over [`GROUND_ANGLE_SCALE`], and the difference
+//!    * the angle between the reference's and the mapped target's largest plane among the points
+//!      below the intensity threshold (the ground in a pole scene, both normals toward the
+//!      sensors; it must hold [`MIN_PLANE_POINTS`] points and 10 % of the cloud) over [`GROUND_ANGLE_SCALE`], and the difference
 //!      of their offsets over [`GROUND_OFFSET_SCALE`] (omitted when a cloud shows no plane);
 //!    * `1 - overlap` over [`OVERLAP_SCALE`], where `overlap` is the fraction of (at most
 //!      [`OVERLAP_SAMPLE`]) target points that land within [`PoleOptions::overlap_distance`] of a
@@ -108,6 +109,8 @@ pub const OVERLAP_SCALE: f64 = 0.1;
 pub const OVERLAP_SAMPLE: usize = 1500;
 /// Points (at most, by a fixed stride) used to find each cloud's largest plane.
 pub const GROUND_SAMPLE: usize = 3000;
+/// Fewest points (and at least 10 % of the cloud) of the largest plane used in the scores.
+pub const MIN_PLANE_POINTS: usize = 200;
 /// Inlier distance of the largest-plane search (metres).
 pub const GROUND_THRESHOLD: f64 = 0.05;
 /// Two refined hypotheses within this rotation (radians) ...
@@ -813,14 +816,18 @@ fn signed_axis(pole: &DetectedPole, sign: i8) -> Line {
     }
 }
 
-fn largest_plane(points: &[Point3<f64>], seed: u64) -> Option<Plane> {
+fn largest_plane(points: &[Point3<f64>], total: usize, seed: u64) -> Option<Plane> {
+    if points.len() < MIN_PLANE_POINTS {
+        return None;
+    }
     let stride = points.len().div_ceil(GROUND_SAMPLE).max(1);
     let sample: Vec<Point3<f64>> = points.iter().step_by(stride).copied().collect();
     let mut o = RansacOptions::new(GROUND_THRESHOLD);
     o.seed = seed;
     let found = ransac_plane(&sample, &o).ok()?;
-    // A "plane" holding a few percent of the points is clutter, not a ground.
-    (found.inliers.len() * 10 >= sample.len()).then_some(found.model)
+    // A "plane" of a few points (the paint of two poles side by side) is not a ground.
+    let inliers = found.inliers.len() * stride;
+    (inliers >= MIN_PLANE_POINTS && inliers * 10 >= total).then_some(found.model)
 }
 
 /// Calibrates `reference_from_target` from taped poles seen by both sensors (see the module
@@ -844,7 +851,14 @@ pub fn calibrate_poles(
     let per_cloud = |points: &[Point3<f64>], intensities: &[f64], which: &str| {
         let extraction =
             extract_poles(points, intensities, options).map_err(|e| with_cloud(e, which))?;
-        let plane = largest_plane(points, options.seed);
+        // The tape is left out: the front faces of two poles can pass for a plane.
+        let dull: Vec<Point3<f64>> = points
+            .iter()
+            .zip(intensities)
+            .filter(|(_, &i)| i < extraction.intensity_threshold)
+            .map(|(p, _)| *p)
+            .collect();
+        let plane = largest_plane(&dull, points.len(), options.seed);
         check_poles(&extraction, which).map(|_| (extraction, plane))
     };
     #[cfg(feature = "parallel")]
