@@ -58,6 +58,17 @@
 //!    other structure are genuinely symmetric under the swap (a 180 deg turn about the vertical
 //!    between them); tilted poles, the ground seen from two places and any other structure break it.
 //!
+//! # Limits
+//! * The default [`PoleOptions::cluster_tolerance`] (0.5 m) joins the rings of a VLP-16 (2 deg
+//!   apart) on a pole up to about 14 m away; further poles need a larger tolerance.
+//! * With more than two poles, the hypotheses start from the first non-parallel pair of
+//!   reference poles (largest first): that pair must be visible to the target sensor too.
+//! * The overlap term prefers transforms that superimpose similar-looking scans; when the two
+//!   scans are alike (sensors facing each other across a symmetric pair of poles), "same pose"
+//!   and the true turn tie, and the calibration is refused rather than guessed.
+//! * The plane term assumes both sensors see the same dominant plane (the ground) from the same
+//!   side; without one it is left out.
+//!
 //! # Example
 //! ```
 //! use lidarcal::calib::poles::{calibrate_poles, PoleOptions, Vendor};
