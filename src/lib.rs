@@ -61,11 +61,13 @@
 )]
 
 pub mod calib;
+pub mod cluster;
 pub mod error;
 pub mod fit;
 pub mod geometry;
 pub mod kabsch;
 pub mod lm;
+pub mod metrics;
 pub mod ransac;
 pub mod residuals;
 pub mod sim;

@@ -7,6 +7,10 @@ Calibration:
 
 * :func:`calibrate_planes` -- from a wall corner (three planes) seen by both sensors, with no
   initial guess and any mounting; returns a :class:`CalibrationResult`.
+* :func:`calibrate_poles` -- from two (or more) non-parallel poles wrapped in retro-reflective
+  tape, from ``(N, 4)`` clouds with intensity; returns the same :class:`CalibrationResult`.
+* :mod:`lidarcal.metrics` -- :func:`lidarcal.metrics.rqe`, the Renyi quadratic entropy
+  crispness for comparing calibrations without ground truth.
 
 The numerical kernels it builds on:
 
@@ -24,7 +28,7 @@ Bad input raises ``ValueError`` naming the problem; a calibration that cannot be
 :class:`CalibrationError`.
 """
 
-from lidarcal import sim  # the simulator, `from lidarcal import sim`
+from lidarcal import metrics, sim  # `from lidarcal import sim` / `metrics`
 from lidarcal._lidarcal import (
     CalibrationError,
     CalibrationResult,
@@ -33,6 +37,7 @@ from lidarcal._lidarcal import (
     RefineResult,
     __version__,
     calibrate_planes,
+    calibrate_poles,
     extract_planes,
     kabsch,
     ransac_line,
@@ -53,8 +58,10 @@ __all__ = [
     "RefineResult",
     "__version__",
     "calibrate_planes",
+    "calibrate_poles",
     "extract_planes",
     "kabsch",
+    "metrics",
     "ransac_line",
     "ransac_plane",
     "refine_point_to_line",

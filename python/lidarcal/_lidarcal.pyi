@@ -2,7 +2,7 @@
 
 from collections.abc import Sequence
 from os import PathLike
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -44,10 +44,16 @@ class RefineResult:
     def covariance(self) -> F64Array | None: ...
 
 class CalibrationResult:
-    """The result of a calibration: ``transform`` maps target points into the reference frame."""
+    """The result of a calibration: ``transform`` maps target points into the reference frame.
+
+    Common to both methods: ``method`` ("planes" or "poles"), ``transform``,
+    ``initial_transform``, ``converged``, ``iterations``, ``cost``, ``termination``, ``rmse``,
+    ``inlier_counts``, ``inliers_reference``, ``inliers_target``, ``covariance``, ``timings``.
+    Plane-only attributes are None for poles and pole-only attributes None for planes.
+    """
 
     @property
-    def method(self) -> str: ...
+    def method(self) -> Literal["planes", "poles"]: ...
     @property
     def transform(self) -> F64Array:
         """(4, 4) ``reference_from_target``."""
@@ -62,11 +68,8 @@ class CalibrationResult:
     @property
     def termination(self) -> str: ...
     @property
-    def rmse(self) -> F64Array: ...
-    @property
-    def planes_reference(self) -> F64Array: ...
-    @property
-    def planes_target(self) -> F64Array: ...
+    def rmse(self) -> F64Array:
+        """(3,) per plane or (K,) per pole, metres."""
     @property
     def inlier_counts(self) -> I64Array: ...
     @property
@@ -74,19 +77,45 @@ class CalibrationResult:
     @property
     def inliers_target(self) -> list[I64Array]: ...
     @property
-    def ordering_scores(self) -> F64Array: ...
-    @property
-    def ordering_margin(self) -> float: ...
-    @property
-    def used_up(self) -> bool: ...
-    @property
-    def corners(self) -> F64Array: ...
-    @property
-    def distance_thresholds(self) -> F64Array: ...
-    @property
     def covariance(self) -> F64Array | None: ...
     @property
     def timings(self) -> dict[str, float]: ...
+    # Planes only (None for poles).
+    @property
+    def planes_reference(self) -> F64Array | None: ...
+    @property
+    def planes_target(self) -> F64Array | None: ...
+    @property
+    def ordering_scores(self) -> F64Array | None: ...
+    @property
+    def ordering_margin(self) -> float | None: ...
+    @property
+    def used_up(self) -> bool | None: ...
+    @property
+    def corners(self) -> F64Array | None: ...
+    @property
+    def distance_thresholds(self) -> F64Array | None: ...
+    # Poles only (None for planes).
+    @property
+    def poles_reference(self) -> F64Array | None:
+        """(K, 6) matched axes [point, direction] in the reference frame."""
+    @property
+    def poles_target(self) -> F64Array | None: ...
+    @property
+    def pole_radii(self) -> F64Array | None: ...
+    @property
+    def intensity_thresholds(self) -> F64Array | None: ...
+    @property
+    def hypothesis_scores(self) -> F64Array | None:
+        """(H,) score of every correspondence/sign hypothesis, lower is better."""
+    @property
+    def hypotheses(self) -> list[dict[str, Any]] | None: ...
+    @property
+    def chosen_hypothesis(self) -> int | None: ...
+    @property
+    def hypothesis_margin(self) -> float | None: ...
+    @property
+    def ambiguous(self) -> bool | None: ...
 
 def calibrate_planes(
     reference: ArrayLike,
@@ -101,6 +130,20 @@ def calibrate_planes(
     min_inliers: int = 50,
     max_iterations: int = 100,
 ) -> CalibrationResult: ...
+def calibrate_poles(
+    reference: ArrayLike,
+    target: ArrayLike,
+    *,
+    intensity_threshold: float | None = None,
+    vendor: Literal["velodyne", "hesai", "leishen", "robosense"] | None = None,
+    pole_radius: float | None = None,
+    seed: int = 0,
+    axis_fit: Literal["cylinder", "line"] = "cylinder",
+    cluster_tolerance: float = 0.5,
+    min_points: int = 15,
+    max_iterations: int = 100,
+) -> CalibrationResult: ...
+def rqe(points: ArrayLike, sigma: float) -> float: ...
 
 class Plane:
     """A plane ``normal . p + offset = 0`` found in a point cloud, with its inliers."""
@@ -325,6 +368,8 @@ def sim_poles_scene(
     distractor: bool = False,
     noise: float | None = None,
     dropout: float = 0.0,
+    max_tilt_deg: float = 15.0,
+    target_upside_down: bool = False,
 ) -> Scene: ...
 def sim_paper_scene(
     *, alpha_deg: float = 90.0, configuration: int | None = 1, seed: int = 0

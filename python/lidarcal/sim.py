@@ -184,10 +184,14 @@ def poles_scene(
     distractor: bool = False,
     noise: float | None = None,
     dropout: float = 0.0,
+    max_tilt_deg: float = 15.0,
+    target_upside_down: bool = False,
 ) -> Scene:
     """Two non-parallel taped poles and the ground, optionally a bright road sign.
 
     ``noise`` defaults to 0.006 m; ``scene.pole_axes`` and ``scene.pole_radii`` hold the truth.
+    Each sensor's roll and pitch are drawn within ``max_tilt_deg``; ``target_upside_down`` adds a
+    180 degree roll to the target.
 
     >>> scene = poles_scene(seed=0)
     >>> scene.pole_axes.shape
@@ -201,6 +205,8 @@ def poles_scene(
         distractor=distractor,
         noise=noise,
         dropout=dropout,
+        max_tilt_deg=max_tilt_deg,
+        target_upside_down=target_upside_down,
     )
 
 

@@ -2,8 +2,11 @@
 //!
 //! * [`planes`]: three planar surfaces of a wall corner seen by both sensors (Jiao et al., 2019),
 //!   without an initial guess and for any mounting orientation.
+//! * [`poles`]: two or more non-parallel poles wrapped in retro-reflective tape (seed 003), with
+//!   the cylinder axis instead of the centroid line and a scored choice among the 8 hypotheses.
 
 pub mod planes;
+pub mod poles;
 
 use std::time::Instant;
 

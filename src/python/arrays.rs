@@ -84,6 +84,50 @@ pub(crate) fn points(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Point3<
         .collect())
 }
 
+/// An `(N, 4)` array `[x, y, z, intensity]`: the points and their intensities. NaN anywhere is
+/// a `ValueError` naming the column, the count and the first row.
+pub(crate) fn points_with_intensity(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+) -> PyResult<(Vec<Point3<f64>>, Vec<f64>)> {
+    let d = dense(obj, name)?;
+    if d.shape.len() != 2 || d.shape[1] != 4 {
+        return Err(PyValueError::new_err(format!(
+            "calibrate_poles needs an (N, 4) array with intensity in the fourth column; \
+             {name} has shape {}",
+            shape_str(&d.shape)
+        )));
+    }
+    let bad_rows = |col: std::ops::Range<usize>| {
+        let rows: Vec<usize> = d
+            .data
+            .chunks_exact(4)
+            .enumerate()
+            .filter(|(_, r)| r[col.clone()].iter().any(|x| !x.is_finite()))
+            .map(|(i, _)| i)
+            .collect();
+        rows
+    };
+    let bad = bad_rows(0..3);
+    if let Some(first) = bad.first() {
+        return Err(PyValueError::new_err(format!(
+            "{name} has {} row(s) with NaN or infinite coordinates; the first is row {first}",
+            bad.len()
+        )));
+    }
+    let bad = bad_rows(3..4);
+    if let Some(first) = bad.first() {
+        return Err(PyValueError::new_err(format!(
+            "{name} has {} NaN or infinite intensity value(s); the first is in row {first}",
+            bad.len()
+        )));
+    }
+    Ok(d.data
+        .chunks_exact(4)
+        .map(|r| (Point3::new(r[0], r[1], r[2]), r[3]))
+        .unzip())
+}
+
 /// An `(N, 3)` array of vectors.
 pub(crate) fn vectors(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Vector3<f64>>> {
     let d = dense(obj, name)?;

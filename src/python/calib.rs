@@ -12,12 +12,87 @@ use super::run;
 use crate::calib::planes::{
     calibrate_planes as rs_calibrate_planes, PlanarCalibration, PlanarOptions,
 };
-use crate::lm::{LmOptions, Loss};
+use crate::calib::poles::{
+    calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
+};
+use crate::calib::Timings;
+use crate::lm::{LmOptions, LmReport, Loss};
+
+/// What a calibration method returned.
+enum Inner {
+    Planes(Box<PlanarCalibration>),
+    Poles(Box<PoleCalibration>),
+}
 
 /// The result of a calibration: `transform` maps target points into the reference frame.
 #[pyclass(frozen, module = "lidarcal", name = "CalibrationResult")]
 pub(crate) struct CalibrationResult {
-    inner: PlanarCalibration,
+    inner: Inner,
+}
+
+impl CalibrationResult {
+    fn planes(&self) -> Option<&PlanarCalibration> {
+        match &self.inner {
+            Inner::Planes(p) => Some(p),
+            Inner::Poles(_) => None,
+        }
+    }
+    fn poles(&self) -> Option<&PoleCalibration> {
+        match &self.inner {
+            Inner::Poles(p) => Some(p),
+            Inner::Planes(_) => None,
+        }
+    }
+    fn pose(&self) -> &Isometry3<f64> {
+        match &self.inner {
+            Inner::Planes(p) => &p.reference_from_target,
+            Inner::Poles(p) => &p.reference_from_target,
+        }
+    }
+    fn initial_pose(&self) -> &Isometry3<f64> {
+        match &self.inner {
+            Inner::Planes(p) => &p.initial_reference_from_target,
+            Inner::Poles(p) => &p.initial_reference_from_target,
+        }
+    }
+    fn report(&self) -> Option<&LmReport> {
+        match &self.inner {
+            Inner::Planes(p) => p.report.as_ref(),
+            Inner::Poles(p) => p.report.as_ref(),
+        }
+    }
+    fn stage_timings(&self) -> &Timings {
+        match &self.inner {
+            Inner::Planes(p) => &p.timings,
+            Inner::Poles(p) => &p.timings,
+        }
+    }
+    fn rmse_values(&self) -> Vec<f64> {
+        match &self.inner {
+            Inner::Planes(p) => p.rmse.to_vec(),
+            Inner::Poles(p) => p.pole_rmse.clone(),
+        }
+    }
+}
+
+fn lines_k6<'py>(
+    py: Python<'py>,
+    lines: &[crate::geometry::Line],
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let data = lines
+        .iter()
+        .flat_map(|l| {
+            [
+                l.point.x,
+                l.point.y,
+                l.point.z,
+                l.direction.x,
+                l.direction.y,
+                l.direction.z,
+            ]
+        })
+        .collect();
+    to_numpy(py, Ix2(lines.len(), 6), data)
 }
 
 fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -26,158 +101,292 @@ fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, P
 
 #[pymethods]
 impl CalibrationResult {
-    /// "planes".
+    /// "planes" or "poles".
     #[getter]
     fn method(&self) -> &'static str {
-        "planes"
+        match self.inner {
+            Inner::Planes(_) => "planes",
+            Inner::Poles(_) => "poles",
+        }
     }
     /// (4, 4) reference_from_target: p_ref = R @ p_tgt + t.
     #[getter]
     fn transform<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        matrix4(py, &self.inner.reference_from_target)
+        matrix4(py, self.pose())
     }
     /// (4, 4) the closed-form estimate before the Levenberg–Marquardt refinement.
     #[getter]
     fn initial_transform<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        matrix4(py, &self.inner.initial_reference_from_target)
+        matrix4(py, self.initial_pose())
     }
     /// True when the refinement converged (or was not requested).
     #[getter]
     fn converged(&self) -> bool {
-        self.inner.report.as_ref().is_none_or(|r| r.converged())
+        self.report().is_none_or(|r| r.converged())
     }
     /// LM iterations (0 without refinement).
     #[getter]
     fn iterations(&self) -> usize {
-        self.inner.report.as_ref().map_or(0, |r| r.iterations)
+        self.report().map_or(0, |r| r.iterations)
     }
     /// Final cost 1/2 sum r^2 of the refinement (NaN without refinement).
     #[getter]
     fn cost(&self) -> f64 {
-        self.inner
-            .report
-            .as_ref()
-            .map_or(f64::NAN, |r| r.final_cost)
+        self.report().map_or(f64::NAN, |r| r.final_cost)
     }
     /// Why the refinement stopped ("none" without refinement).
     #[getter]
     fn termination(&self) -> &'static str {
-        self.inner
-            .report
-            .as_ref()
-            .map_or("none", |r| r.termination.as_str())
+        self.report().map_or("none", |r| r.termination.as_str())
     }
-    /// (3,) RMS point-to-plane residual per matched plane (metres), both clouds together.
+    /// RMS residual (metres) per matched feature: (3,) point-to-plane per plane, or (K,)
+    /// point-to-axis per pole; both clouds together.
     #[getter]
     fn rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        to_numpy(py, Ix1(3), self.inner.rmse.to_vec())
+        let v = self.rmse_values();
+        to_numpy(py, Ix1(v.len()), v)
     }
-    /// (3, 4) matched planes [nx, ny, nz, d] in the reference frame (normals toward the sensor).
+    /// (3, 4) matched planes [nx, ny, nz, d] in the reference frame (normals toward the sensor);
+    /// None for poles.
     #[getter]
-    fn planes_reference<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = self
-            .inner
-            .planes_reference
-            .iter()
-            .flat_map(|p| p.coefficients().iter().copied().collect::<Vec<_>>())
-            .collect();
-        to_numpy(py, Ix2(3, 4), data)
+    fn planes_reference<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.planes()
+            .map(|p| {
+                let data = p
+                    .planes_reference
+                    .iter()
+                    .flat_map(|p| p.coefficients().iter().copied().collect::<Vec<_>>())
+                    .collect();
+                to_numpy(py, Ix2(3, 4), data)
+            })
+            .transpose()
     }
-    /// (3, 4) matched planes in the target frame, row i matching planes_reference[i].
+    /// (3, 4) matched planes in the target frame, row i matching planes_reference[i]; None for
+    /// poles.
     #[getter]
-    fn planes_target<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let data = self
-            .inner
-            .planes_target
-            .iter()
-            .flat_map(|p| p.coefficients().iter().copied().collect::<Vec<_>>())
-            .collect();
-        to_numpy(py, Ix2(3, 4), data)
+    fn planes_target<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.planes()
+            .map(|p| {
+                let data = p
+                    .planes_target
+                    .iter()
+                    .flat_map(|p| p.coefficients().iter().copied().collect::<Vec<_>>())
+                    .collect();
+                to_numpy(py, Ix2(3, 4), data)
+            })
+            .transpose()
     }
-    /// (2, 3) inliers per matched plane: row 0 reference, row 1 target.
+    /// (2, K) points per matched feature: row 0 reference, row 1 target (K = 3 planes or the
+    /// matched poles).
     #[getter]
     fn inlier_counts<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
-        let counts: Vec<i64> = self
-            .inner
-            .inliers_reference
-            .iter()
-            .chain(&self.inner.inliers_target)
-            .map(|v| v.len() as i64)
-            .collect();
-        numpy::ndarray::Array2::from_shape_vec((2, 3), counts)
+        let (a, b) = self.index_sets();
+        let k = a.len();
+        let counts: Vec<i64> = a.iter().chain(b).map(|v| v.len() as i64).collect();
+        numpy::ndarray::Array2::from_shape_vec((2, k), counts)
             .map(|a| numpy::IntoPyArray::into_pyarray(a, py))
-            .unwrap_or_else(|_| PyArray2::zeros(py, (2, 3), false))
+            .unwrap_or_else(|_| PyArray2::zeros(py, (2, k), false))
     }
-    /// Three int64 arrays: indices of each matched plane's inliers in the reference cloud.
+    /// int64 arrays: indices of each matched plane's (or pole's) points in the reference cloud.
     #[getter]
     fn inliers_reference<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, PyArray1<i64>>> {
-        self.inner
-            .inliers_reference
+        self.index_sets()
+            .0
             .iter()
             .map(|v| PyArray1::from_iter(py, v.iter().map(|&i| i as i64)))
             .collect()
     }
-    /// Three int64 arrays: indices of each matched plane's inliers in the target cloud.
+    /// int64 arrays: indices of each matched plane's (or pole's) points in the target cloud.
     #[getter]
     fn inliers_target<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, PyArray1<i64>>> {
-        self.inner
-            .inliers_target
+        self.index_sets()
+            .1
             .iter()
             .map(|v| PyArray1::from_iter(py, v.iter().map(|&i| i as i64)))
             .collect()
     }
     /// (3,) RMS normal misalignment (rad) of each cyclic plane correspondence; lower is better.
+    /// None for poles (see hypothesis_scores).
     #[getter]
-    fn ordering_scores<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        to_numpy(py, Ix1(3), self.inner.ordering.scores.to_vec())
+    fn ordering_scores<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        self.planes()
+            .map(|p| to_numpy(py, Ix1(3), p.ordering.scores.to_vec()))
+            .transpose()
     }
-    /// Runner-up score minus the chosen one (rad): how clearly the planes were matched.
+    /// Runner-up score minus the chosen one (rad): how clearly the planes were matched; None for
+    /// poles.
     #[getter]
-    fn ordering_margin(&self) -> f64 {
-        self.inner.ordering.margin
+    fn ordering_margin(&self) -> Option<f64> {
+        self.planes().map(|p| p.ordering.margin)
     }
-    /// True when the geometry was ambiguous and the `up` tie-break chose the correspondence.
+    /// True when the geometry was ambiguous and the `up` tie-break chose the correspondence;
+    /// None for poles.
     #[getter]
-    fn used_up(&self) -> bool {
-        self.inner.ordering.used_up
+    fn used_up(&self) -> Option<bool> {
+        self.planes().map(|p| p.ordering.used_up)
     }
-    /// (2, 3) the corner point in the reference and in the target frame.
+    /// (2, 3) the corner point in the reference and in the target frame; None for poles.
     #[getter]
-    fn corners<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let [a, b] = self.inner.corners;
-        to_numpy(py, Ix2(2, 3), vec![a.x, a.y, a.z, b.x, b.y, b.z])
+    fn corners<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.planes()
+            .map(|p| {
+                let [a, b] = p.corners;
+                to_numpy(py, Ix2(2, 3), vec![a.x, a.y, a.z, b.x, b.y, b.z])
+            })
+            .transpose()
     }
-    /// (2,) inlier thresholds used for the reference and the target cloud (metres).
+    /// (2,) inlier thresholds used for the reference and the target cloud (metres); None for poles.
     #[getter]
-    fn distance_thresholds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        to_numpy(py, Ix1(2), self.inner.distance_thresholds.to_vec())
+    fn distance_thresholds<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        self.planes()
+            .map(|p| to_numpy(py, Ix1(2), p.distance_thresholds.to_vec()))
+            .transpose()
+    }
+    /// (K, 6) matched pole axes [point, unit direction] in the reference frame; None for planes.
+    #[getter]
+    fn poles_reference<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.poles()
+            .map(|p| lines_k6(py, &p.poles_reference))
+            .transpose()
+    }
+    /// (K, 6) matched pole axes in the target frame, directions signed to match
+    /// poles_reference; None for planes.
+    #[getter]
+    fn poles_target<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.poles()
+            .map(|p| lines_k6(py, &p.poles_target))
+            .transpose()
+    }
+    /// (K,) radius of each matched pole (metres; given, or the mean of both clouds' estimates;
+    /// 0 with axis_fit="line"); None for planes.
+    #[getter]
+    fn pole_radii<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        self.poles()
+            .map(|p| to_numpy(py, Ix1(p.radii.len()), p.radii.clone()))
+            .transpose()
+    }
+    /// (2,) intensity thresholds used for the reference and the target cloud; None for planes.
+    #[getter]
+    fn intensity_thresholds<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        self.poles()
+            .map(|p| {
+                let v = p
+                    .extractions
+                    .iter()
+                    .map(|e| e.intensity_threshold)
+                    .collect();
+                to_numpy(py, Ix1(2), v)
+            })
+            .transpose()
+    }
+    /// (H,) score of every correspondence/sign hypothesis (lower is better), in enumeration
+    /// order; None for planes.
+    #[getter]
+    fn hypothesis_scores<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        self.poles()
+            .map(|p| {
+                let v: Vec<f64> = p.hypotheses.iter().map(|h| h.score).collect();
+                to_numpy(py, Ix1(v.len()), v)
+            })
+            .transpose()
+    }
+    /// Every hypothesis as a dict: matches [(reference pole, target pole, sign)], axis_rms (m),
+    /// ground_angle_deg, ground_offset (m) (None without a plane), overlap, score,
+    /// rotation_to_chosen_deg; None for planes.
+    #[getter]
+    fn hypotheses<'py>(&self, py: Python<'py>) -> PyResult<Option<Vec<Bound<'py, PyDict>>>> {
+        let Some(p) = self.poles() else {
+            return Ok(None);
+        };
+        let chosen = p.reference_from_target;
+        let mut out = Vec::with_capacity(p.hypotheses.len());
+        for h in &p.hypotheses {
+            let d = PyDict::new(py);
+            let matches: Vec<(usize, usize, i8)> = h.matches.clone();
+            d.set_item("matches", matches)?;
+            d.set_item("axis_rms", h.axis_rms)?;
+            d.set_item("ground_angle_deg", h.ground_angle.map(f64::to_degrees))?;
+            d.set_item("ground_offset", h.ground_offset)?;
+            d.set_item("overlap", h.overlap)?;
+            d.set_item("score", h.score)?;
+            let rel = h.reference_from_target.inverse() * chosen;
+            d.set_item("rotation_to_chosen_deg", rel.rotation.angle().to_degrees())?;
+            out.push(d);
+        }
+        Ok(Some(out))
+    }
+    /// Index of the chosen hypothesis; None for planes.
+    #[getter]
+    fn chosen_hypothesis(&self) -> Option<usize> {
+        self.poles().map(|p| p.chosen)
+    }
+    /// Score of the best hypothesis reaching a different transform minus the chosen one's
+    /// (inf when all agree); None for planes.
+    #[getter]
+    fn hypothesis_margin(&self) -> Option<f64> {
+        self.poles().map(|p| p.margin)
+    }
+    /// True when the margin is below 1 (a near-tie, though not refused); None for planes.
+    #[getter]
+    fn ambiguous(&self) -> Option<bool> {
+        self.poles().map(|p| p.ambiguous)
     }
     /// (6, 6) covariance of the left-perturbation tangent [rho, phi] (m, rad), or None.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.inner
-            .covariance
-            .map(|c| to_numpy(py, Ix2(6, 6), row_major(&c)))
+        let c = match &self.inner {
+            Inner::Planes(p) => p.covariance,
+            Inner::Poles(p) => p.covariance,
+        };
+        c.map(|c| to_numpy(py, Ix2(6, 6), row_major(&c)))
             .transpose()
     }
     /// Milliseconds per stage, plus "total".
     #[getter]
     fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for (name, ms) in &self.inner.timings.stages {
+        let t = self.stage_timings();
+        for (name, ms) in &t.stages {
             d.set_item(*name, *ms)?;
         }
-        d.set_item("total", self.inner.timings.total())?;
+        d.set_item("total", t.total())?;
         Ok(d)
     }
     fn __repr__(&self) -> String {
-        let pose = &self.inner.reference_from_target;
+        let pose = self.pose();
         let t = pose.translation.vector;
         let rpy = pose.rotation.euler_angles();
+        let rmse: Vec<String> = self
+            .rmse_values()
+            .iter()
+            .map(|r| format!("{r:.4}"))
+            .collect();
+        let extra = match &self.inner {
+            Inner::Planes(_) => String::new(),
+            Inner::Poles(p) => format!(
+                ", poles={}, hypothesis_margin={:.2}, ambiguous={}",
+                p.poles_reference.len(),
+                p.margin,
+                if p.ambiguous { "True" } else { "False" }
+            ),
+        };
         format!(
-            "CalibrationResult(method='planes', converged={}, rotation_rpy_deg=[{:.3}, {:.3}, {:.3}], \
-             translation_m=[{:.4}, {:.4}, {:.4}], rmse_m=[{:.4}, {:.4}, {:.4}], iterations={}, \
+            "CalibrationResult(method='{}', converged={}, rotation_rpy_deg=[{:.3}, {:.3}, {:.3}], \
+             translation_m=[{:.4}, {:.4}, {:.4}], rmse_m=[{}]{extra}, iterations={}, \
              total_ms={:.2})",
+            self.method(),
             if self.converged() { "True" } else { "False" },
             rpy.0.to_degrees(),
             rpy.1.to_degrees(),
@@ -185,12 +394,19 @@ impl CalibrationResult {
             t.x,
             t.y,
             t.z,
-            self.inner.rmse[0],
-            self.inner.rmse[1],
-            self.inner.rmse[2],
+            rmse.join(", "),
             self.iterations(),
-            self.inner.timings.total()
+            self.stage_timings().total()
         )
+    }
+}
+
+impl CalibrationResult {
+    fn index_sets(&self) -> (&[Vec<usize>], &[Vec<usize>]) {
+        match &self.inner {
+            Inner::Planes(p) => (&p.inliers_reference, &p.inliers_target),
+            Inner::Poles(p) => (&p.indices_reference, &p.indices_target),
+        }
     }
 }
 
@@ -289,11 +505,89 @@ fn calibrate_planes(
     let inner = run(py, move || {
         rs_calibrate_planes(&reference, &target, &options)
     })?;
-    Ok(CalibrationResult { inner })
+    Ok(CalibrationResult {
+        inner: Inner::Planes(Box::new(inner)),
+    })
+}
+
+/// Calibrates reference_from_target from two (or more) non-parallel taped poles.
+///
+/// reference, target: (N, 4) clouds [x, y, z, intensity] in their sensors' frames.
+/// intensity_threshold: returns at or above it are tape; wins over vendor.
+/// vendor: "velodyne" (230), "hesai", "leishen" or "robosense" (200); with neither, the threshold
+///     is the middle of the widest intensity gap above the median.
+/// pole_radius: metres, or None to estimate it per pole. axis_fit: "cylinder" (default) or "line"
+///     (the seed's centroid line, biased by up to a radius; for comparison).
+/// Raises ValueError for malformed input and CalibrationError with the reason (no bright points,
+/// fewer than two poles, parallel poles, indistinguishable hypotheses).
+#[pyfunction]
+#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit="cylinder", cluster_tolerance=0.5, min_points=15, max_iterations=100))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate_poles(
+    py: Python<'_>,
+    reference: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    intensity_threshold: Option<f64>,
+    vendor: Option<&str>,
+    pole_radius: Option<f64>,
+    seed: u64,
+    axis_fit: &str,
+    cluster_tolerance: f64,
+    min_points: usize,
+    max_iterations: usize,
+) -> PyResult<CalibrationResult> {
+    let (reference, ref_intensity) = arrays::points_with_intensity(reference, "reference")?;
+    let (target, tgt_intensity) = arrays::points_with_intensity(target, "target")?;
+    let vendor = vendor.map(Vendor::from_name).transpose()?;
+    let axis_fit = match axis_fit {
+        "cylinder" => AxisFit::Cylinder,
+        "line" => AxisFit::Line,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "axis_fit must be 'cylinder' or 'line', got {other:?}"
+            )))
+        }
+    };
+    let defaults = PoleOptions::default();
+    let options = PoleOptions {
+        intensity_threshold,
+        vendor,
+        pole_radius,
+        seed,
+        axis_fit,
+        cluster_tolerance,
+        min_points,
+        lm: LmOptions {
+            max_iterations,
+            ..defaults.lm
+        },
+        ..defaults
+    };
+    let inner = run(py, move || {
+        rs_calibrate_poles(
+            &reference,
+            &ref_intensity,
+            &target,
+            &tgt_intensity,
+            &options,
+        )
+    })?;
+    Ok(CalibrationResult {
+        inner: Inner::Poles(Box::new(inner)),
+    })
+}
+
+/// Rényi quadratic entropy crispness of a cloud (larger is crisper); see lidarcal.metrics.rqe.
+#[pyfunction]
+fn rqe(py: Python<'_>, points: &Bound<'_, PyAny>, sigma: f64) -> PyResult<f64> {
+    let points = arrays::points(points, "points")?;
+    run(py, move || crate::metrics::rqe(&points, sigma)).map(|r| r.crispness)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CalibrationResult>()?;
     m.add_function(wrap_pyfunction!(calibrate_planes, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_poles, m)?)?;
+    m.add_function(wrap_pyfunction!(rqe, m)?)?;
     Ok(())
 }

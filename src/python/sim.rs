@@ -428,7 +428,7 @@ fn sim_corner_scene<'py>(
 
 /// The two-poles scene.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, seed=0, radius=0.1, distance=5.0, distractor=false, noise=None, dropout=0.0))]
+#[pyo3(signature = (model=None, *, seed=0, radius=0.1, distance=5.0, distractor=false, noise=None, dropout=0.0, max_tilt_deg=15.0, target_upside_down=false))]
 #[allow(clippy::too_many_arguments)]
 fn sim_poles_scene<'py>(
     py: Python<'py>,
@@ -439,6 +439,8 @@ fn sim_poles_scene<'py>(
     distractor: bool,
     noise: Option<f64>,
     dropout: f64,
+    max_tilt_deg: f64,
+    target_upside_down: bool,
 ) -> PyResult<Scene> {
     let model = model_arg(model)?;
     let options = PolesOptions {
@@ -448,6 +450,8 @@ fn sim_poles_scene<'py>(
         distractor,
         range_noise: noise,
         dropout,
+        max_tilt_deg,
+        target_upside_down,
     };
     let inner = run(py, move || poles_scene(&model, &options))?;
     Ok(Scene {

@@ -514,7 +514,7 @@ pub const POLE_MIN_ANGLE_DEG: f64 = 3.0;
 pub const POLE_LENGTH: f64 = 3.0;
 /// The taped band of each pole, metres from the base.
 pub const POLE_BAND: (f64, f64) = (0.5, 2.5);
-/// Largest roll and pitch of the pole scene's sensors, degrees.
+/// Largest roll and pitch of the pole scene's sensors by default, degrees.
 pub const POLES_MAX_TILT_DEG: f64 = 15.0;
 /// Largest pole radius accepted, metres.
 pub const MAX_POLE_RADIUS: f64 = 1.0;
@@ -539,6 +539,10 @@ pub struct PolesOptions {
     pub range_noise: Option<f64>,
     /// Dropout probability of each return.
     pub dropout: f64,
+    /// Largest roll and pitch of each sensor, degrees (at most 90).
+    pub max_tilt_deg: f64,
+    /// Mount the target sensor upside down (an extra 180 deg roll after the random pose).
+    pub target_upside_down: bool,
 }
 
 impl Default for PolesOptions {
@@ -550,6 +554,8 @@ impl Default for PolesOptions {
             distractor: false,
             range_noise: None,
             dropout: 0.0,
+            max_tilt_deg: POLES_MAX_TILT_DEG,
+            target_upside_down: false,
         }
     }
 }
@@ -567,7 +573,8 @@ fn random_pole_axis(rng: &mut ChaCha8Rng) -> Vector3<f64> {
 /// World frame: ground `z = 0`; the poles stand on it around `(distance, 0, 0)`, spaced 1.5–4 m
 /// apart along y, axes drawn with z-component > 0.9 and at least 3 deg apart, 3 m long with tape
 /// from 0.5 m to 2.5 m. The reference sensor is near `(0, -1, 1.2)`, the target near `(0, 1, 1.2)`,
-/// each with a random heading and a tilt under 15 deg. The true planes are the ground alone; the
+/// each with a random heading and a tilt under `max_tilt_deg` (15 deg by default; the target
+/// optionally upside down). The true planes are the ground alone; the
 /// sign (when present) sits beside the poles, facing the sensors, with tape-bright intensity.
 pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
     super::check_dropout(options.dropout)?;
@@ -581,6 +588,12 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
         return Err(Error::InvalidInput(format!(
             "pole distance must be in [1, 50] metres, got {}",
             options.distance
+        )));
+    }
+    if !(options.max_tilt_deg.is_finite() && (0.0..=90.0).contains(&options.max_tilt_deg)) {
+        return Err(Error::InvalidInput(format!(
+            "max_tilt_deg must be in [0, 90], got {}",
+            options.max_tilt_deg
         )));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
@@ -624,7 +637,7 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
         cylinders.push(c);
         shapes.push(Shape::cylinder(c, POLE_PAINT));
     }
-    let tilt = POLES_MAX_TILT_DEG.to_radians();
+    let tilt = options.max_tilt_deg.to_radians();
     let mut sensor_pose = |y: f64| {
         let t = Vector3::new(
             uniform(&mut rng, -0.5, 0.5),
@@ -639,7 +652,10 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
         )
     };
     let world_from_reference = sensor_pose(-1.0);
-    let world_from_target = sensor_pose(1.0);
+    let mut world_from_target = sensor_pose(1.0);
+    if options.target_upside_down {
+        world_from_target *= UnitQuaternion::from_euler_angles(std::f64::consts::PI, 0.0, 0.0);
+    }
     if options.distractor {
         let side = if rng.random::<bool>() { 1.0 } else { -1.0 };
         let y = side * (0.5 * spacing + uniform(&mut rng, 1.5, 2.5));
