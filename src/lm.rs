@@ -202,9 +202,12 @@ where
         acc
     };
     #[cfg(feature = "parallel")]
-    let partials: Vec<A> = {
+    let partials: Vec<A> = if items.len() > CHUNK {
         use rayon::prelude::*;
         items.par_chunks(CHUNK).map(chunk_sum).collect()
+    } else {
+        // One chunk: the same sum without a round trip through the thread pool.
+        items.chunks(CHUNK).map(chunk_sum).collect()
     };
     #[cfg(not(feature = "parallel"))]
     let partials: Vec<A> = items.chunks(CHUNK).map(chunk_sum).collect();

@@ -180,9 +180,11 @@ fn assign(points: &[Point3<f64>], planes: &[Plane], threshold: f64) -> Vec<Vec<u
         found
     };
     #[cfg(feature = "parallel")]
-    let owners: Vec<Option<usize>> = {
+    let owners: Vec<Option<usize>> = if points.len() >= super::PARALLEL_MIN_POINTS {
         use rayon::prelude::*;
         points.par_iter().map(owner).collect()
+    } else {
+        points.iter().map(owner).collect()
     };
     #[cfg(not(feature = "parallel"))]
     let owners: Vec<Option<usize>> = points.iter().map(owner).collect();
