@@ -28,6 +28,7 @@
 //! ```
 
 use std::collections::{HashMap, VecDeque};
+use std::ops::ControlFlow;
 
 use nalgebra::Point3;
 
@@ -95,8 +96,30 @@ impl<'a> Grid<'a> {
     /// (`radius <= cell`; larger radii are clamped to the cell). Points of non-finite queries or
     /// queries outside the grid's coordinate range are not visited.
     pub fn for_each_within<F: FnMut(usize, f64)>(&self, q: &Point3<f64>, radius: f64, mut f: F) {
+        // The visitor never breaks, so the walk always runs to the end.
+        let _ = self.visit_within(q, radius, |i, d2| {
+            f(i, d2);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// Whether any indexed point lies within `radius` (at most the cell) of `q`.
+    pub fn any_within(&self, q: &Point3<f64>, radius: f64) -> bool {
+        self.visit_within(q, radius, |_, _| ControlFlow::Break(()))
+            .is_break()
+    }
+
+    /// Calls `f(index, squared distance)` for the indexed points within `radius` (clamped to the
+    /// cell) of `q`, from the 27 cells around `q`'s, until `f` breaks; nothing for a query outside
+    /// the grid's range. Plain loops: this is the hot path of clustering and RQE.
+    fn visit_within<F: FnMut(usize, f64) -> ControlFlow<()>>(
+        &self,
+        q: &Point3<f64>,
+        radius: f64,
+        mut f: F,
+    ) -> ControlFlow<()> {
         let Ok(key) = Self::key_of(q, self.cell) else {
-            return;
+            return ControlFlow::Continue(());
         };
         let r2 = radius.min(self.cell).powi(2);
         for dx in -1..=1 {
@@ -107,37 +130,14 @@ impl<'a> Grid<'a> {
                         for &i in idx {
                             let d2 = (self.points[i] - q).norm_squared();
                             if d2 <= r2 {
-                                f(i, d2);
+                                f(i, d2)?;
                             }
                         }
                     }
                 }
             }
         }
-    }
-
-    /// Whether any indexed point lies within `radius` (at most the cell) of `q`.
-    pub fn any_within(&self, q: &Point3<f64>, radius: f64) -> bool {
-        let Ok(key) = Self::key_of(q, self.cell) else {
-            return false;
-        };
-        let r2 = radius.min(self.cell).powi(2);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let k = [key[0] + dx, key[1] + dy, key[2] + dz];
-                    if let Some(idx) = self.cells.get(&k) {
-                        if idx
-                            .iter()
-                            .any(|&i| (self.points[i] - q).norm_squared() <= r2)
-                        {
-                            return true;
-                        }
-                    }
-                }
-            }
-        }
-        false
+        ControlFlow::Continue(())
     }
 }
 

@@ -539,13 +539,7 @@ fn split_cluster(
     // Only a cluster at least as long as a pole can hold crossing poles; a sign is not split.
     let moments = Moments::from_points(members);
     let (_, vectors) = moments.principal_axes();
-    let mean = moments.mean();
-    let (lo, hi) = members
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-            let s = (p - mean).dot(&vectors[2]);
-            (lo.min(s), hi.max(s))
-        });
+    let (lo, hi) = extent_along(members, &moments.mean(), &vectors[2]);
     if hi - lo < SPLIT_MIN_LENGTH {
         return out;
     }
@@ -607,12 +601,7 @@ fn fit_pole(
         f64::INFINITY
     };
     let mean = moments.mean();
-    let (lo, hi) = members
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-            let s = (p - mean).dot(&vectors[2]);
-            (lo.min(s), hi.max(s))
-        });
+    let (lo, hi) = extent_along(members, &mean, &vectors[2]);
     let length = hi - lo;
     if elongation < options.min_elongation {
         return Err(format!(
@@ -1138,6 +1127,16 @@ fn with_cloud(e: Error, which: &str) -> Error {
         Error::InvalidInput(m) => Error::InvalidInput(format!("{which} cloud: {m}")),
         other => other,
     }
+}
+
+/// The smallest and largest coordinate of `points` along `axis`, measured from `origin`.
+fn extent_along(points: &[Point3<f64>], origin: &Point3<f64>, axis: &Vector3<f64>) -> (f64, f64) {
+    points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            let s = (p - origin).dot(axis);
+            (lo.min(s), hi.max(s))
+        })
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use crate::calib::poles::{
     calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
 };
 use crate::calib::Timings;
+use crate::geometry::Plane;
 use crate::lm::{LmOptions, LmReport, Loss};
 
 /// What a calibration method returned.
@@ -95,6 +96,15 @@ fn lines_k6<'py>(
     to_numpy(py, Ix2(lines.len(), 6), data)
 }
 
+/// (3, 4) rows [nx, ny, nz, d].
+fn planes_array<'py>(py: Python<'py>, planes: &[Plane; 3]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let data = planes
+        .iter()
+        .flat_map(|p| p.coefficients().as_slice().to_vec())
+        .collect();
+    to_numpy(py, Ix2(3, 4), data)
+}
+
 fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
     to_numpy(py, Ix2(4, 4), row_major(&pose.to_homogeneous()))
 }
@@ -154,14 +164,7 @@ impl CalibrationResult {
         py: Python<'py>,
     ) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
         self.planes()
-            .map(|p| {
-                let data = p
-                    .planes_reference
-                    .iter()
-                    .flat_map(|p| p.coefficients().iter().copied().collect::<Vec<_>>())
-                    .collect();
-                to_numpy(py, Ix2(3, 4), data)
-            })
+            .map(|p| planes_array(py, &p.planes_reference))
             .transpose()
     }
     /// (3, 4) matched planes in the target frame, row i matching planes_reference[i]; None for
@@ -169,14 +172,7 @@ impl CalibrationResult {
     #[getter]
     fn planes_target<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
         self.planes()
-            .map(|p| {
-                let data = p
-                    .planes_target
-                    .iter()
-                    .flat_map(|p| p.coefficients().iter().copied().collect::<Vec<_>>())
-                    .collect();
-                to_numpy(py, Ix2(3, 4), data)
-            })
+            .map(|p| planes_array(py, &p.planes_target))
             .transpose()
     }
     /// (2, K) points per matched feature: row 0 reference, row 1 target (K = 3 planes or the
