@@ -331,6 +331,27 @@ pub const CORNER_WALL_ANGLE_RANGE: (f64, f64) = (30.0, 150.0);
 /// Largest number of extra walls of the corner scene.
 pub const MAX_EXTRA_WALLS: usize = 2;
 
+/// Scans `shapes` from the reference and the target pose with the same model, noise and dropout
+/// and independent seeds.
+fn scan_pair(
+    model: &BeamModel,
+    shapes: &[Shape],
+    world_from: [&Isometry3<f64>; 2],
+    seeds: (u64, u64),
+    range_noise: Option<f64>,
+    dropout: f64,
+) -> Result<(Scan, Scan)> {
+    let options = |seed| ScanOptions {
+        seed,
+        range_noise,
+        dropout,
+    };
+    Ok((
+        scan(model, shapes, world_from[0], &options(seeds.0))?,
+        scan(model, shapes, world_from[1], &options(seeds.1))?,
+    ))
+}
+
 /// A building corner scanned by two sensors of `model`.
 ///
 /// World frame: the corner at the origin, wall 1 in the plane `y = 0` along +x, wall 2 along
@@ -466,25 +487,13 @@ pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene>
         }
     }
     let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
-    let reference = scan(
+    let (reference, target) = scan_pair(
         model,
         &shapes,
-        &world_from_reference,
-        &ScanOptions {
-            seed: scan_seeds.0,
-            range_noise: options.range_noise,
-            dropout: options.dropout,
-        },
-    )?;
-    let target = scan(
-        model,
-        &shapes,
-        &world_from_target,
-        &ScanOptions {
-            seed: scan_seeds.1,
-            range_noise: options.range_noise,
-            dropout: options.dropout,
-        },
+        [&world_from_reference, &world_from_target],
+        scan_seeds,
+        options.range_noise,
+        options.dropout,
     )?;
     let planes: Vec<Plane> = rectangles.iter().map(|r| r.plane()).collect();
     Ok(Scene {
@@ -668,25 +677,13 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
     }
     let noise = Some(options.range_noise.unwrap_or(POLES_RANGE_NOISE));
     let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
-    let reference = scan(
+    let (reference, target) = scan_pair(
         model,
         &shapes,
-        &world_from_reference,
-        &ScanOptions {
-            seed: scan_seeds.0,
-            range_noise: noise,
-            dropout: options.dropout,
-        },
-    )?;
-    let target = scan(
-        model,
-        &shapes,
-        &world_from_target,
-        &ScanOptions {
-            seed: scan_seeds.1,
-            range_noise: noise,
-            dropout: options.dropout,
-        },
+        [&world_from_reference, &world_from_target],
+        scan_seeds,
+        noise,
+        options.dropout,
     )?;
     let reference_from_world = world_from_reference.inverse();
     let poles = cylinders
