@@ -3,8 +3,11 @@
 //! Library code never panics on bad input: every fallible function returns [`Result`]. The variants
 //! separate "the caller passed something malformed" ([`Error::InvalidInput`]), "the input is well
 //! formed but does not determine an answer" ([`Error::Degenerate`]) and "a calibration pipeline could
-//! not find a trustworthy solution" ([`Error::Calibration`]). The Python layer maps the first two to
-//! `ValueError`, a calibration failure to `lidarcal.CalibrationError` and [`Error::Io`] to `OSError`.
+//! not find a trustworthy solution" ([`Error::Calibration`]). File problems are [`Error::Io`] (the
+//! operating system refused: missing file, permissions) or [`Error::Format`] (the bytes are not a
+//! valid point cloud). The Python layer maps the first two to `ValueError`, a calibration failure to
+//! `lidarcal.CalibrationError`, [`Error::Io`] to `OSError` (its subclass for the kind, e.g.
+//! `FileNotFoundError`) and [`Error::Format`] to `lidarcal.FileFormatError`, a `ValueError`.
 
 /// Errors returned by lidarcal.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -23,8 +26,17 @@ pub enum Error {
     #[error("numerical failure: {0}")]
     Numerical(String),
     /// Reading or writing a file failed; the message names the path and the OS error.
-    #[error("I/O error: {0}")]
-    Io(String),
+    #[error("I/O error: {message}")]
+    Io {
+        /// What the operating system reported (`NotFound`, `PermissionDenied`, ...).
+        kind: std::io::ErrorKind,
+        /// The path and the OS message.
+        message: String,
+    },
+    /// A file's contents are not a valid point cloud of its format (bad header, truncated data,
+    /// a corrupt compressed block); the message names the file and the problem.
+    #[error("malformed file: {0}")]
+    Format(String),
 }
 
 /// Shorthand for `Result<T, lidarcal::Error>`.

@@ -21,6 +21,11 @@ The numerical kernels it builds on:
 * :func:`ransac_plane`, :func:`ransac_line`, :func:`extract_planes` -- deterministic parallel
   RANSAC, returning :class:`Plane` and :class:`Line` objects with their inliers.
 
+Files: :func:`read_points` reads PCD (ascii, binary, binary_compressed), PLY, KITTI ``.bin``,
+``.npy`` and CSV/TXT into an ``(N, K)`` float64 array (``x y z`` and the intensity when the file
+has one, or the fields you name); :func:`write_points` writes them. A malformed file raises
+:class:`FileFormatError` (a ``ValueError``) naming the file and the problem.
+
 The scan simulator lives in :mod:`lidarcal.sim` (``from lidarcal import sim``) and the command
 line in ``lidarcal simulate``.
 
@@ -32,6 +37,7 @@ from lidarcal import metrics, sim  # `from lidarcal import sim` / `metrics`
 from lidarcal._lidarcal import (
     CalibrationError,
     CalibrationResult,
+    FileFormatError,
     Line,
     Plane,
     RefineResult,
@@ -42,17 +48,20 @@ from lidarcal._lidarcal import (
     kabsch,
     ransac_line,
     ransac_plane,
+    read_points,
     refine_point_to_line,
     refine_point_to_plane,
     se3_exp,
     se3_log,
     so3_exp,
     so3_log,
+    write_points,
 )
 
 __all__ = [
     "CalibrationError",
     "CalibrationResult",
+    "FileFormatError",
     "Line",
     "Plane",
     "RefineResult",
@@ -64,6 +73,7 @@ __all__ = [
     "metrics",
     "ransac_line",
     "ransac_plane",
+    "read_points",
     "refine_point_to_line",
     "refine_point_to_plane",
     "se3_exp",
@@ -71,4 +81,5 @@ __all__ = [
     "sim",
     "so3_exp",
     "so3_log",
+    "write_points",
 ]

@@ -2,7 +2,7 @@
 
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +17,30 @@ __version__: str
 
 class CalibrationError(RuntimeError):
     """A calibration could not produce a trustworthy result; the message says why."""
+
+class FileFormatError(ValueError):
+    """A file is not a valid point cloud of its format; the message names the file and why."""
+
+class ReadInfo(TypedDict):
+    path: str
+    fields: list[str]
+    available: list[str]
+    points: int
+    dropped_non_finite: int
+
+FieldsArg = Literal["all"] | Sequence[str] | None
+
+@overload
+def read_points(
+    path: str | PathLike[str], fields: FieldsArg = None, *, with_info: Literal[False] = False
+) -> F64Array: ...
+@overload
+def read_points(
+    path: str | PathLike[str], fields: FieldsArg = None, *, with_info: Literal[True]
+) -> tuple[F64Array, ReadInfo]: ...
+def write_points(
+    path: str | PathLike[str], points: ArrayLike, fields: Sequence[str] | None = None
+) -> None: ...
 
 class RefineResult:
     """The result of a refinement: the transform and the solver's report."""

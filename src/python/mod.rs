@@ -5,13 +5,17 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use pyo3::create_exception;
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{
+    PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError, PyRuntimeError,
+    PyValueError,
+};
 use pyo3::prelude::*;
 
 use crate::Error;
 
 mod arrays;
 mod calib;
+mod io;
 mod kernels;
 mod ransac;
 mod sim;
@@ -23,15 +27,29 @@ create_exception!(
     "A calibration could not produce a trustworthy result; the message says why."
 );
 
+create_exception!(
+    lidarcal,
+    FileFormatError,
+    PyValueError,
+    "A file is not a valid point cloud of its format; the message names the file and the problem."
+);
+
 /// One place where core errors become Python exceptions: malformed or degenerate input is a
-/// `ValueError`, a failed calibration a `lidarcal.CalibrationError`, a file error an `OSError`.
+/// `ValueError`, a failed calibration a `lidarcal.CalibrationError`, a file the system refused an
+/// `OSError` of the matching subclass, a malformed file a `lidarcal.FileFormatError` (a `ValueError`).
 impl From<Error> for PyErr {
     fn from(e: Error) -> PyErr {
         match e {
             Error::InvalidInput(m) | Error::Degenerate(m) => PyValueError::new_err(m),
             Error::Calibration(m) => CalibrationError::new_err(m),
             Error::Numerical(m) => CalibrationError::new_err(format!("numerical failure: {m}")),
-            Error::Io(m) => PyOSError::new_err(m),
+            Error::Io { kind, message } => match kind {
+                std::io::ErrorKind::NotFound => PyFileNotFoundError::new_err(message),
+                std::io::ErrorKind::PermissionDenied => PyPermissionError::new_err(message),
+                std::io::ErrorKind::IsADirectory => PyIsADirectoryError::new_err(message),
+                _ => PyOSError::new_err(message),
+            },
+            Error::Format(m) => FileFormatError::new_err(m),
         }
     }
 }
@@ -63,6 +81,8 @@ where
 fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("CalibrationError", m.py().get_type::<CalibrationError>())?;
+    m.add("FileFormatError", m.py().get_type::<FileFormatError>())?;
+    io::register(m)?;
     kernels::register(m)?;
     ransac::register(m)?;
     calib::register(m)?;
