@@ -1,5 +1,9 @@
 """The ``lidarcal`` command line.
 
+``lidarcal calibrate REFERENCE TARGET [TARGET...]`` calibrates each target cloud (PCD, PLY, KITTI
+``.bin``, ``.npy``, CSV/TXT, or a ROS bag with ``--topic``) to the reference and prints or writes
+the transforms (``--output x.yaml|.json|.txt|.urdf``, ``--json``, ``--plot x.png``).
+
 ``lidarcal demo`` simulates a building corner seen by two LiDARs, calibrates it with no initial
 guess and prints the ground truth, the estimate and the errors (``--json`` for scripts).
 
@@ -9,13 +13,26 @@ guess and prints the ground truth, the estimate and the errors (``--json`` for s
 
 from __future__ import annotations
 
+import contextlib
 import json
+import sys
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import click
 import numpy as np
 
-from lidarcal import CalibrationError, __version__, calibrate_planes, sim
+from lidarcal import (
+    CalibrationError,
+    CalibrationResult,
+    __version__,
+    calibrate_planes,
+    calibrate_poles,
+    read_points,
+    sim,
+)
+from lidarcal.export import rpy, static_transform_publisher, to_dict, write_result
 
 
 @click.group()
@@ -97,11 +114,7 @@ def simulate(scene_name: str, model: str, seed: int, output: Path, fmt: str, asc
 
 def _rpy_deg(transform: np.ndarray) -> list[float]:
     """Roll, pitch, yaw (degrees) of R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    r = transform[:3, :3]
-    pitch = np.arcsin(np.clip(-r[2, 0], -1.0, 1.0))
-    roll = np.arctan2(r[2, 1], r[2, 2])
-    yaw = np.arctan2(r[1, 0], r[0, 0])
-    return [float(np.degrees(a)) for a in (roll, pitch, yaw)]
+    return [float(v) for v in np.degrees(rpy(transform[:3, :3]))]
 
 
 def _errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
@@ -132,9 +145,32 @@ def _errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
     help="Largest roll/pitch of the second sensor, degrees.",
 )
 @click.option("--clutter", type=int, default=4, show_default=True, help="Clutter boxes.")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
+@click.option(
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the result, as `lidarcal calibrate --output` does (.yaml/.json/.txt/.urdf).",
+)
+@click.option(
+    "--plot",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write a PNG of the clouds before/after (needs matplotlib).",
+)
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object (the fields of `lidarcal calibrate --json` plus ground truth and "
+    "errors) instead of text.",
+)
 def demo(
-    model: str, seed: int, wall_angle: float, tilt: float, clutter: int, as_json: bool
+    model: str,
+    seed: int,
+    wall_angle: float,
+    tilt: float,
+    clutter: int,
+    output: Path | None,
+    plot: Path | None,
+    as_json: bool,
 ) -> None:
     """Simulate a building corner seen by two LiDARs and calibrate it, with no initial guess.
 
@@ -150,19 +186,25 @@ def demo(
         raise click.ClickException(str(e)) from e
     truth = scene.reference_from_target
     rot_err, trans_err = _errors(truth, result.transform)
-    report = {
-        "method": result.method,
-        "model": model,
-        "seed": seed,
-        "points": [len(scene.reference), len(scene.target)],
-        "transform": result.transform.tolist(),
-        "ground_truth": truth.tolist(),
-        "rotation_error_deg": rot_err,
-        "translation_error_m": trans_err,
-        "converged": result.converged,
-        "rmse": result.rmse.tolist(),
-        "timings_ms": result.timings,
-    }
+    report = to_dict(result, reference="reference", target="target")
+    report.update(
+        model=model,
+        seed=seed,
+        points=[len(scene.reference), len(scene.target)],
+        ground_truth=truth.tolist(),
+        rotation_error_deg=rot_err,
+        translation_error_m=trans_err,
+        timings_ms=result.timings,
+    )
+    if output is not None:
+        if output.suffix.lower() not in (".yaml", ".yml", ".json", ".txt", ".urdf"):
+            raise click.BadParameter("use .yaml, .json, .txt or .urdf", param_hint="--output")
+        try:
+            write_result(output, report)
+        except OSError as e:
+            raise click.ClickException(str(e)) from e
+    if plot is not None:
+        _plot(scene.reference, scene.target, result, plot, f"lidarcal demo ({model}, seed {seed})")
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -182,6 +224,276 @@ def demo(
         f"{', '.join(f'{100 * r:.2f}' for r in result.rmse)} cm, "
         f"{result.timings['total']:.1f} ms"
     )
+
+
+def _floats(text: str | None, count: int, option: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.replace(" ", "").split(",")]
+    except ValueError:
+        values = []
+    if len(values) != count or not all(np.isfinite(values)):
+        raise click.BadParameter(
+            f"needs {count} comma-separated numbers, got {text!r}", param_hint=option
+        )
+    return values
+
+
+def load_cloud(
+    path: Path, crop: Sequence[float] | None, topic: str | None, time: float | None
+) -> np.ndarray:
+    """Reads a cloud (a file or one frame of a bag) and crops it to the box, in its own frame."""
+    from lidarcal.rosbag import is_bag, read_bag
+
+    if is_bag(path):
+        points = read_bag(path, topic, time=time)
+    else:
+        points = read_points(path)
+    if crop is not None:
+        lo, hi = np.array(crop[0::2]), np.array(crop[1::2])
+        keep = np.all((points[:, :3] >= lo) & (points[:, :3] <= hi), axis=1)
+        points = points[keep]
+        if len(points) == 0:
+            raise ValueError(f"{path}: no point is left inside the --crop box")
+    return points
+
+
+def _calibrate(
+    method: str, reference: np.ndarray, target: np.ndarray, options: dict[str, Any]
+) -> CalibrationResult:
+    if method == "planes":
+        return calibrate_planes(
+            reference[:, :3],
+            target[:, :3],
+            up=options["up"],
+            distance_threshold=options["threshold"],
+            seed=options["seed"],
+        )
+    if reference.shape[1] < 4 or target.shape[1] < 4:
+        which = "reference" if reference.shape[1] < 4 else "target"
+        raise ValueError(f"--method poles needs intensity, and the {which} file has none")
+    return calibrate_poles(
+        reference,
+        target,
+        intensity_threshold=options["intensity_threshold"],
+        vendor=options["vendor"],
+        seed=options["seed"],
+    )
+
+
+def _summary(entry: dict[str, Any], parent: str, child: str) -> str:
+    t = np.array(entry["transform"])
+    fmt = "[{:+.4f}, {:+.4f}, {:+.4f}]"
+    lines = [
+        f"{entry['target']} -> {entry['reference']} ({entry['method']}, "
+        f"converged {entry['converged']})",
+        "  reference_from_target:",
+        *("    " + " ".join(f"{v:+.6f}" for v in row) for row in t),
+        f"  translation m     {fmt.format(*entry['translation'])}",
+        f"  rpy deg           {fmt.format(*entry['rpy_deg'])}",
+        "  quaternion xyzw   [{:+.6f}, {:+.6f}, {:+.6f}, {:+.6f}]".format(
+            *entry["quaternion_xyzw"]
+        ),
+    ]
+    if "std_translation_m" in entry:
+        sd_t = 100 * np.array(entry["std_translation_m"])
+        sd_r = np.array(entry["std_rotation_deg"])
+        lines.append(
+            f"  1-sigma           translation {fmt.format(*sd_t)} cm, "
+            f"rotation {fmt.format(*sd_r)} deg"
+        )
+    rmse = ", ".join(f"{100 * r:.2f}" for r in entry["rmse"])
+    lines.append(f"  feature rmse cm   {rmse}")
+    lines.append("  " + static_transform_publisher(t, parent, child))
+    return "\n".join(lines)
+
+
+def _plot(
+    reference: np.ndarray, target: np.ndarray, result: CalibrationResult, png: Path, title: str
+) -> None:
+    try:
+        from lidarcal.plot import overlay
+    except ImportError as e:
+        raise click.ClickException(str(e)) from e
+    try:
+        overlay(reference, target, result, path=png, title=title)
+    except ImportError as e:
+        raise click.ClickException(str(e)) from e
+    except OSError as e:
+        raise click.ClickException(f"{png}: {e}") from e
+
+
+def _frame_name(path: Path) -> str:
+    cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in path.stem)
+    return cleaned or "frame"
+
+
+@main.command()
+@click.argument("reference", type=click.Path(exists=True, path_type=Path))
+@click.argument("targets", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--method",
+    type=click.Choice(["planes", "poles"]),
+    default="planes",
+    show_default=True,
+    help="planes: a wall corner (three planes) seen by both sensors. poles: two or more poles "
+    "wrapped in retro-reflective tape (the clouds need intensity).",
+)
+@click.option(
+    "--crop",
+    metavar="XMIN,XMAX,YMIN,YMAX,ZMIN,ZMAX",
+    help="Keep only points inside this box (metres, each cloud in its own frame).",
+)
+@click.option(
+    "--up",
+    metavar="X,Y,Z",
+    help="planes: the up direction (against gravity) in both sensors' frames, e.g. 0,0,1 for two "
+    "upright sensors; used only to tell the walls of a right-angled corner apart.",
+)
+@click.option(
+    "--threshold", type=float, help="planes: RANSAC inlier distance (m); default from the noise."
+)
+@click.option(
+    "--intensity-threshold", type=float, help="poles: intensity above which a return is tape."
+)
+@click.option(
+    "--vendor",
+    type=click.Choice(["velodyne", "hesai", "leishen", "robosense"]),
+    help="poles: take that vendor's tape threshold.",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="RANSAC seed.")
+@click.option("--topic", help="For bags: the PointCloud2 topic (needed if there are several).")
+@click.option(
+    "--time",
+    "bag_time",
+    type=float,
+    help="For bags: seconds from the start (or Unix time) of the frame.",
+)
+@click.option(
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the result(s): .yaml or .json (matrix, translation, quaternion xyzw, "
+    "roll-pitch-yaw, uncertainty, diagnostics), .txt (4x4 matrices) or .urdf (fixed joints).",
+)
+@click.option(
+    "--plot",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write a PNG of the clouds before/after with the matched features and residuals "
+    "(needs matplotlib). With several targets, one file per target: NAME_<target>.png.",
+)
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object on stdout: the result for one target, or "
+    '{"results": [...]} for several.',
+)
+def calibrate(
+    reference: Path,
+    targets: tuple[Path, ...],
+    method: str,
+    crop: str | None,
+    up: str | None,
+    threshold: float | None,
+    intensity_threshold: float | None,
+    vendor: str | None,
+    seed: int,
+    topic: str | None,
+    bag_time: float | None,
+    output: Path | None,
+    plot: Path | None,
+    as_json: bool,
+) -> None:
+    """Calibrate each TARGET cloud to the REFERENCE cloud, with no initial guess.
+
+    The result is the 4x4 transform reference_from_target: p_reference = R p_target + t.
+    Files may be PCD, PLY, KITTI .bin, .npy, CSV/TXT, or ROS bags (--topic, --time).
+
+    \b
+    Examples:
+      lidarcal calibrate top.pcd front.pcd --up 0,0,1 --output front.yaml --plot front.png
+      lidarcal calibrate top.pcd left.pcd right.pcd --crop -20,20,-20,20,-3,10 --json
+      lidarcal calibrate ref.bag tgt.bag --topic /points --method poles --vendor hesai
+
+    Exits with status 1 and a one-line message if a calibration fails; the other targets are
+    still calibrated and reported.
+    """
+    crop_box = _floats(crop, 6, "--crop")
+    if crop_box is not None and any(
+        lo > hi for lo, hi in zip(crop_box[0::2], crop_box[1::2], strict=True)
+    ):
+        raise click.BadParameter("each minimum must not exceed its maximum", param_hint="--crop")
+    options = {
+        "up": _floats(up, 3, "--up"),
+        "threshold": threshold,
+        "intensity_threshold": intensity_threshold,
+        "vendor": vendor,
+        "seed": seed,
+    }
+    if output is not None and output.suffix.lower() not in (
+        ".yaml",
+        ".yml",
+        ".json",
+        ".txt",
+        ".urdf",
+    ):
+        raise click.BadParameter("use .yaml, .json, .txt or .urdf", param_hint="--output")
+    try:
+        ref_points = load_cloud(reference, crop_box, topic, bag_time)
+    except (ValueError, OSError) as e:
+        raise click.ClickException(str(e)) from e
+
+    entries: list[dict[str, Any]] = []
+    failures: list[str] = []
+    show_progress = len(targets) > 1 and sys.stderr.isatty()
+    with contextlib.ExitStack() as stack:
+        items: Iterable[Path] = targets
+        if show_progress:
+            items = stack.enter_context(
+                click.progressbar(
+                    targets,
+                    label="calibrating",
+                    file=sys.stderr,
+                    item_show_func=lambda p: p.name if p is not None else None,
+                )
+            )
+        for target in items:
+            try:
+                tgt_points = load_cloud(target, crop_box, topic, bag_time)
+                result = _calibrate(method, ref_points, tgt_points, options)
+            except (ValueError, OSError, CalibrationError) as e:
+                failures.append(f"{target}: {e}")
+                entries.append(
+                    {"reference": str(reference), "target": str(target), "error": str(e)}
+                )
+                continue
+            entry = to_dict(result, reference=str(reference), target=str(target))
+            entries.append(entry)
+            if plot is not None:
+                png = plot
+                if len(targets) > 1:
+                    png = plot.with_name(f"{plot.stem}_{_frame_name(target)}{plot.suffix}")
+                _plot(ref_points, tgt_points, result, png, f"{target.name} -> {reference.name}")
+                entry["plot"] = str(png)
+
+    good = [e for e in entries if "error" not in e]
+    if output is not None and good:
+        try:
+            write_result(output, good)
+        except OSError as e:
+            raise click.ClickException(str(e)) from e
+    if as_json:
+        click.echo(json.dumps(entries[0] if len(entries) == 1 else {"results": entries}))
+    else:
+        for entry in good:
+            click.echo(_summary(entry, _frame_name(reference), _frame_name(Path(entry["target"]))))
+        if output is not None and good:
+            click.echo(f"wrote {output}")
+    for message in failures:
+        click.echo(f"Error: {message}", err=True)
+    if failures:
+        sys.exit(1)
 
 
 if __name__ == "__main__":  # pragma: no cover

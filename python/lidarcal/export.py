@@ -1,0 +1,280 @@
+"""Calibration results in the forms robotics stacks read.
+
+* :func:`to_dict` -- a JSON-ready dictionary: the 4x4 ``reference_from_target``, translation,
+  quaternion (x, y, z, w), roll-pitch-yaw, uncertainties and the method's diagnostics;
+* :func:`write_result` -- ``.yaml`` / ``.json`` (that dictionary), ``.txt`` (the 4x4 matrix) or
+  ``.urdf`` (a fixed ``<joint>`` whose origin is the transform), chosen by the extension;
+* :func:`static_transform_publisher` -- the ``tf2_ros`` command that publishes the transform.
+
+Angles follow ROS (REP 103): ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, the convention of URDF
+``rpy`` and of ``tf2``. The target frame is the child, the reference frame the parent.
+
+>>> import numpy as np
+>>> from lidarcal.export import quaternion_xyzw, rpy
+>>> yaw90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+>>> np.round(quaternion_xyzw(yaw90), 6).tolist()
+[0.0, 0.0, 0.707107, 0.707107]
+>>> np.round(np.degrees(rpy(yaw90)), 6).tolist()
+[0.0, -0.0, 90.0]
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+import numpy.typing as npt
+
+from lidarcal._lidarcal import CalibrationResult
+
+F64Array = npt.NDArray[np.float64]
+
+__all__ = [
+    "quaternion_xyzw",
+    "rpy",
+    "static_transform_publisher",
+    "to_dict",
+    "to_yaml",
+    "write_result",
+]
+
+
+def quaternion_xyzw(rotation: npt.ArrayLike) -> F64Array:
+    """The unit quaternion ``[x, y, z, w]`` (``w >= 0``) of a 3x3 rotation matrix."""
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape != (3, 3):
+        raise ValueError(f"rotation must be 3x3, got shape {r.shape}")
+    # Shepperd's method: divide by the largest of the four candidate components.
+    trace = float(np.trace(r))
+    diag = np.diag(r)
+    k = int(np.argmax([trace, *diag]))
+    if k == 0:
+        w = 0.5 * math.sqrt(max(1.0 + trace, 0.0))
+        q = [
+            (r[2, 1] - r[1, 2]) / (4 * w),
+            (r[0, 2] - r[2, 0]) / (4 * w),
+            (r[1, 0] - r[0, 1]) / (4 * w),
+            w,
+        ]
+    else:
+        i = k - 1
+        j, m = (i + 1) % 3, (i + 2) % 3
+        s = 0.5 * math.sqrt(max(1.0 + 2.0 * diag[i] - trace, 0.0))
+        q = [0.0, 0.0, 0.0, (r[m, j] - r[j, m]) / (4 * s)]
+        q[i] = s
+        q[j] = (r[j, i] + r[i, j]) / (4 * s)
+        q[m] = (r[m, i] + r[i, m]) / (4 * s)
+    out = np.array(q, dtype=np.float64)
+    out /= np.linalg.norm(out)
+    return -out if out[3] < 0 else out
+
+
+def rpy(rotation: npt.ArrayLike) -> F64Array:
+    """``[roll, pitch, yaw]`` in radians with ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``."""
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape != (3, 3):
+        raise ValueError(f"rotation must be 3x3, got shape {r.shape}")
+    cos_pitch = math.hypot(r[0, 0], r[1, 0])
+    pitch = math.atan2(-r[2, 0], cos_pitch)  # atan2 stays accurate near +-90 deg, asin does not
+    if cos_pitch > 1e-12:
+        roll = math.atan2(r[2, 1], r[2, 2])
+        yaw = math.atan2(r[1, 0], r[0, 0])
+    else:  # gimbal lock: only roll -/+ yaw is determined; put it all in yaw
+        roll = 0.0
+        yaw = math.atan2(-r[0, 1], r[1, 1])
+    return np.array([roll, pitch, yaw])
+
+
+def _list(a: Any) -> Any:
+    return None if a is None else np.asarray(a).tolist()
+
+
+def to_dict(
+    result: CalibrationResult,
+    *,
+    reference: str | None = None,
+    target: str | None = None,
+) -> dict[str, Any]:
+    """A JSON-ready summary of ``result``; ``reference`` / ``target`` name the frames or files."""
+    t = np.asarray(result.transform)
+    rotation, translation = t[:3, :3], t[:3, 3]
+    angles = rpy(rotation)
+    out: dict[str, Any] = {
+        "reference": reference,
+        "target": target,
+        "method": result.method,
+        "transform": t.tolist(),
+        "translation": translation.tolist(),
+        "quaternion_xyzw": quaternion_xyzw(rotation).tolist(),
+        "rpy_rad": angles.tolist(),
+        "rpy_deg": np.degrees(angles).tolist(),
+        "converged": bool(result.converged),
+        "rmse": _list(result.rmse),
+    }
+    cov = result.covariance
+    if cov is not None:
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        out["std_translation_m"] = sd[:3].tolist()
+        out["std_rotation_deg"] = np.degrees(sd[3:]).tolist()
+    diagnostics: dict[str, Any] = {
+        "iterations": int(result.iterations),
+        "cost": float(result.cost),
+        "termination": result.termination,
+        "inlier_counts": _list(result.inlier_counts),
+        "timings_ms": dict(result.timings),
+        "covariance": _list(cov),
+    }
+    if result.method == "planes":
+        diagnostics.update(
+            planes_reference=_list(result.planes_reference),
+            planes_target=_list(result.planes_target),
+            ordering_scores=_list(result.ordering_scores),
+            ordering_margin=result.ordering_margin,
+            used_up=result.used_up,
+            distance_thresholds=_list(result.distance_thresholds),
+        )
+    elif result.method == "poles":
+        diagnostics.update(
+            poles_reference=_list(result.poles_reference),
+            poles_target=_list(result.poles_target),
+            pole_radii=_list(result.pole_radii),
+            intensity_thresholds=_list(result.intensity_thresholds),
+            hypothesis_scores=_list(result.hypothesis_scores),
+            hypothesis_margin=result.hypothesis_margin,
+            ambiguous=result.ambiguous,
+        )
+    out["diagnostics"] = diagnostics
+    return out
+
+
+def _yaml_scalar(v: Any) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        if isinstance(v, float) and not math.isfinite(v):
+            return ".nan" if math.isnan(v) else (".inf" if v > 0 else "-.inf")
+        return repr(v)
+    return json.dumps(str(v))  # a JSON string is a valid YAML double-quoted scalar
+
+
+def _yaml(v: Any, indent: int) -> list[str]:
+    pad = "  " * indent
+    if isinstance(v, dict):
+        lines = []
+        for key, item in v.items():
+            if isinstance(item, (dict, list)) and item and not _flat(item):
+                lines.append(f"{pad}{key}:")
+                lines.extend(_yaml(item, indent + 1))
+            else:
+                lines.append(f"{pad}{key}: {_inline(item)}")
+        return lines
+    if isinstance(v, list):
+        lines = []
+        for item in v:
+            if isinstance(item, (dict, list)) and item and not _flat(item):
+                sub = _yaml(item, indent + 1)
+                lines.append(f"{pad}- {sub[0].lstrip()}")
+                lines.extend(sub[1:])
+            else:
+                lines.append(f"{pad}- {_inline(item)}")
+        return lines
+    return [f"{pad}{_yaml_scalar(v)}"]
+
+
+def _flat(v: Any) -> bool:
+    """A list of scalars or of lists of scalars (a matrix), written inline."""
+    if isinstance(v, list):
+        return all(not isinstance(x, (dict, list)) or (isinstance(x, list) and _flat(x)) for x in v)
+    return False
+
+
+def _inline(v: Any) -> str:
+    if isinstance(v, list):
+        return "[" + ", ".join(_inline(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{}" if not v else json.dumps(v)
+    return _yaml_scalar(v)
+
+
+def to_yaml(data: dict[str, Any] | list[dict[str, Any]]) -> str:
+    """YAML text of :func:`to_dict` output (or a list of them); no YAML library needed."""
+    return "\n".join(_yaml(data, 0)) + "\n"
+
+
+def _frame(name: str | None, default: str) -> str:
+    stem = Path(name).stem if name else default
+    cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in stem)
+    return cleaned or default
+
+
+def static_transform_publisher(
+    transform: npt.ArrayLike, parent: str, child: str, *, ros1: bool = False
+) -> str:
+    """The ``tf2_ros static_transform_publisher`` command publishing ``parent <- child``."""
+    t = np.asarray(transform, dtype=np.float64)
+    x, y, z = (f"{v:.6f}" for v in t[:3, 3])
+    qx, qy, qz, qw = (f"{v:.9f}" for v in quaternion_xyzw(t[:3, :3]))
+    if ros1:
+        return (
+            f"rosrun tf2_ros static_transform_publisher {x} {y} {z} {qx} {qy} {qz} {qw} "
+            f"{parent} {child}"
+        )
+    return (
+        f"ros2 run tf2_ros static_transform_publisher --x {x} --y {y} --z {z} --qx {qx} "
+        f"--qy {qy} --qz {qz} --qw {qw} --frame-id {parent} --child-frame-id {child}"
+    )
+
+
+def _urdf(entries: Sequence[dict[str, Any]]) -> str:
+    parent = _frame(entries[0]["reference"], "reference")
+    links = [parent] + [_frame(e["target"], f"target_{i}") for i, e in enumerate(entries)]
+    lines = ['<?xml version="1.0"?>', '<robot name="lidarcal_calibration">']
+    lines += [f"  <link name={quoteattr(name)}/>" for name in dict.fromkeys(links)]
+    for child, e in zip(links[1:], entries, strict=True):
+        xyz = " ".join(f"{v:.9g}" for v in e["translation"])
+        angles = " ".join(f"{v:.9g}" for v in e["rpy_rad"])
+        lines += [
+            f'  <joint name={quoteattr(f"{parent}_to_{child}")} type="fixed">',
+            f"    <parent link={quoteattr(parent)}/>",
+            f"    <child link={quoteattr(child)}/>",
+            f'    <origin xyz="{xyz}" rpy="{angles}"/>',
+            "  </joint>",
+        ]
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"
+
+
+def write_result(path: str | Path, entries: dict[str, Any] | Sequence[dict[str, Any]]) -> None:
+    """Writes :func:`to_dict` output (one, or a list for several targets) by extension:
+    ``.yaml``/``.yml``, ``.json``, ``.txt`` (the 4x4 matrices, one block per target with a
+    comment line) or ``.urdf`` (one fixed joint per target)."""
+    path = Path(path)
+    items = [entries] if isinstance(entries, dict) else list(entries)
+    if not items:
+        raise ValueError("no results to write")
+    ext = path.suffix.lower()
+    single: Any = items[0] if len(items) == 1 else items
+    if ext in (".yaml", ".yml"):
+        text = to_yaml(single)
+    elif ext == ".json":
+        text = json.dumps(single, indent=2) + "\n"
+    elif ext == ".txt":
+        blocks = []
+        for e in items:
+            matrix = "\n".join(" ".join(f"{v: .9f}" for v in row) for row in e["transform"])
+            blocks.append(f"# reference_from_target: {e['reference']} <- {e['target']}\n{matrix}")
+        text = "\n".join(blocks) + "\n"
+    elif ext == ".urdf":
+        text = _urdf(items)
+    else:
+        raise ValueError(
+            f"{path}: unknown output extension {ext!r}; use .yaml, .json, .txt or .urdf"
+        )
+    path.write_text(text)
