@@ -39,7 +39,11 @@ def read_points(
     path: str | PathLike[str], fields: FieldsArg = None, *, with_info: Literal[True]
 ) -> tuple[F64Array, ReadInfo]: ...
 def write_points(
-    path: str | PathLike[str], points: ArrayLike, fields: Sequence[str] | None = None
+    path: str | PathLike[str],
+    points: ArrayLike,
+    fields: Sequence[str] | None = None,
+    *,
+    pcd_format: Literal["binary", "binary_compressed", "ascii"] = "binary",
 ) -> None: ...
 
 class RefineResult:

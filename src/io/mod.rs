@@ -170,10 +170,16 @@ pub fn parse_points(bytes: &[u8], format: FileFormat, fields: &Fields) -> Result
     }
 }
 
-/// Writes `data` (row-major, `names.len()` columns) to `path` in the format of its extension.
-/// KITTI `.bin` needs columns `x y z` and writes `intensity` (0 when absent). Errors for
-/// non-finite values, a ragged `data` and I/O failures.
-pub fn write_points(path: &Path, names: &[String], data: &[f64]) -> Result<()> {
+/// Writes `data` (row-major, `names.len()` columns) to `path` in the format of its extension;
+/// `pcd_format` chooses the PCD encoding (other formats ignore it). KITTI `.bin` needs columns
+/// `x y z` and writes `intensity` (0 when absent). Errors for non-finite values, a ragged `data`
+/// and I/O failures.
+pub fn write_points(
+    path: &Path,
+    names: &[String],
+    data: &[f64],
+    pcd_format: pcd::PcdFormat,
+) -> Result<()> {
     let format = FileFormat::from_path(path)?;
     if names.is_empty() || !data.len().is_multiple_of(names.len()) {
         return Err(Error::InvalidInput(format!(
@@ -192,7 +198,7 @@ pub fn write_points(path: &Path, names: &[String], data: &[f64]) -> Result<()> {
     match format {
         FileFormat::Pcd => {
             let types = vec![Scalar::F32; names.len()];
-            pcd::write_table(&mut bytes, names, &types, data, pcd::PcdFormat::Binary)?
+            pcd::write_table(&mut bytes, names, &types, data, pcd_format)?
         }
         FileFormat::Ply => ply::write(&mut bytes, names, data),
         FileFormat::Kitti => kitti::write(&mut bytes, names, data)?,

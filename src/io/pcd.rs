@@ -321,7 +321,7 @@ pub(crate) fn parse(bytes: &[u8], fields: &Fields) -> Result<Cloud> {
                 .iter()
                 .filter(|&&b| b == b'\n')
                 .count();
-            table::decode_text_rows(
+            let mut values = table::decode_text_rows(
                 text.lines()
                     .enumerate()
                     .map(|(i, l)| (i + header_lines + 1, l)),
@@ -329,7 +329,13 @@ pub(crate) fn parse(bytes: &[u8], fields: &Fields) -> Result<Cloud> {
                 &select,
                 tokens,
                 Some(n),
-            )?
+            )?;
+            let scalars: Vec<Scalar> = pick
+                .iter()
+                .map(|&c| header.fields[cols[c].field].scalar)
+                .collect();
+            table::round_f32_columns(&mut values, &scalars);
+            values
         }
         PcdFormat::Binary => {
             if data.len() < total {

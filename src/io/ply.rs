@@ -241,13 +241,16 @@ pub(crate) fn parse(bytes: &[u8], fields: &Fields) -> Result<Cloud> {
                     return Err(bad("the body ends before the vertex element"));
                 }
             }
-            table::decode_text_rows(
+            let mut values = table::decode_text_rows(
                 lines,
                 |l| l.split_whitespace().collect(),
                 &pick,
                 available.len(),
                 Some(n),
-            )?
+            )?;
+            let picked: Vec<Scalar> = pick.iter().map(|&c| scalars[c]).collect();
+            table::round_f32_columns(&mut values, &picked);
+            values
         }
         Encoding::Little | Encoding::Big => {
             let big = encoding == Encoding::Big;

@@ -238,6 +238,22 @@ where
     Ok(out)
 }
 
+/// Rounds the text-parsed values of `f32` columns to `f32`, as a binary reader would store them
+/// (a PCD or PLY text file writes the shortest decimal of the declared type).
+pub(crate) fn round_f32_columns(values: &mut [f64], scalars: &[Scalar]) {
+    let k = scalars.len();
+    if k == 0 || !scalars.contains(&Scalar::F32) {
+        return;
+    }
+    for row in values.chunks_exact_mut(k) {
+        for (v, s) in row.iter_mut().zip(scalars) {
+            if *s == Scalar::F32 {
+                *v = f64::from(*v as f32);
+            }
+        }
+    }
+}
+
 /// Builds the cloud, dropping rows with a non-finite value.
 pub(crate) fn finish(mut data: Vec<f64>, names: Vec<String>, available: Vec<String>) -> Cloud {
     let k = names.len();

@@ -63,13 +63,24 @@ fn read_points<'py>(
 
 /// Writes an (N, K) array as a point cloud file chosen by the extension.
 #[pyfunction]
-#[pyo3(signature = (path, points, fields=None))]
+#[pyo3(signature = (path, points, fields=None, *, pcd_format="binary"))]
 fn write_points(
     py: Python<'_>,
     path: PathBuf,
     points: &Bound<'_, PyAny>,
     fields: Option<Vec<String>>,
+    pcd_format: &str,
 ) -> PyResult<()> {
+    let pcd_format = match pcd_format {
+        "binary" => io::pcd::PcdFormat::Binary,
+        "binary_compressed" => io::pcd::PcdFormat::BinaryCompressed,
+        "ascii" => io::pcd::PcdFormat::Ascii,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "pcd_format must be \"binary\", \"binary_compressed\" or \"ascii\", got {other:?}"
+            )))
+        }
+    };
     let d = arrays::dense(points, "points")?;
     let k = match d.shape.as_slice() {
         [_, k] if *k >= 3 => *k,
@@ -90,7 +101,9 @@ fn write_points(
         Some(names) => names,
         None => io::default_names(k),
     };
-    run(py, move || io::write_points(&path, &names, &d.data))
+    run(py, move || {
+        io::write_points(&path, &names, &d.data, pcd_format)
+    })
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

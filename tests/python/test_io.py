@@ -53,6 +53,17 @@ def test_round_trip(tmp_path: Path, ext: str) -> None:
     np.testing.assert_array_equal(got, expected.astype(np.float64))
 
 
+@pytest.mark.parametrize("encoding", ["binary", "binary_compressed", "ascii"])
+def test_pcd_encodings_round_trip(tmp_path: Path, encoding: str) -> None:
+    path = tmp_path / "cloud.pcd"
+    big = np.random.default_rng(0).normal(size=(5000, 4)) * 20
+    lidarcal.write_points(path, big, pcd_format=encoding)  # type: ignore[arg-type]
+    assert f"DATA {encoding}\n".encode() in path.read_bytes()[:400]
+    np.testing.assert_array_equal(lidarcal.read_points(path), big.astype(np.float32))
+    with pytest.raises(ValueError, match="pcd_format must be"):
+        lidarcal.write_points(path, big, pcd_format="zip")  # type: ignore[arg-type]
+
+
 def test_fields_selection_and_names(tmp_path: Path) -> None:
     path = tmp_path / "c.csv"
     data = np.column_stack([POINTS, [7, 8, 9]])
