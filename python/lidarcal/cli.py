@@ -17,6 +17,7 @@ import contextlib
 import json
 import sys
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -240,22 +241,59 @@ def _floats(text: str | None, count: int, option: str) -> list[float] | None:
     return values
 
 
+@dataclass(frozen=True)
+class Source:
+    """A cloud on the command line: a file, or a bag with an optional ``:/topic`` suffix."""
+
+    text: str
+    path: Path
+    topic: str | None
+
+    @property
+    def frame(self) -> str:
+        """A frame name for URDF / tf: the topic for bags, else the file's stem."""
+        base = self.topic.strip("/") if self.topic else self.path.stem
+        cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in base)
+        return cleaned or "frame"
+
+
+# click >= 8.2 makes ParamType generic; subscripting it would break older clicks at import.
+class SourceType(click.ParamType):  # type: ignore[type-arg]
+    """``FILE`` or ``BAG:/topic``; the file must exist."""
+
+    name = "cloud"
+
+    def convert(
+        self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+    ) -> Source:
+        if isinstance(value, Source):
+            return value
+        text = str(value)
+        path = Path(text)
+        if path.exists():
+            return Source(text, path, None)
+        head, sep, tail = text.rpartition(":/")
+        if sep and Path(head).exists():
+            return Source(text, Path(head), "/" + tail)
+        self.fail(f"{text}: no such file (a bag topic is given as BAG:/topic)", param, ctx)
+
+
 def load_cloud(
-    path: Path, crop: Sequence[float] | None, topic: str | None, time: float | None
+    source: Source, crop: Sequence[float] | None, topic: str | None, time: float | None
 ) -> np.ndarray:
     """Reads a cloud (a file or one frame of a bag) and crops it to the box, in its own frame."""
     from lidarcal.rosbag import is_bag, read_bag
 
-    if is_bag(path):
-        points = read_bag(path, topic, time=time)
+    if source.topic is not None or is_bag(source.path):
+        points = read_bag(source.path, source.topic or topic, time=time)
     else:
-        points = read_points(path)
+        points = read_points(source.path)
     if crop is not None:
         lo, hi = np.array(crop[0::2]), np.array(crop[1::2])
         keep = np.all((points[:, :3] >= lo) & (points[:, :3] <= hi), axis=1)
         points = points[keep]
         if len(points) == 0:
-            raise ValueError(f"{path}: no point is left inside the --crop box")
+            raise ValueError(f"{source.text}: no point is left inside the --crop box")
     return points
 
 
@@ -299,9 +337,10 @@ def _summary(entry: dict[str, Any], parent: str, child: str) -> str:
     if "std_translation_m" in entry:
         sd_t = 100 * np.array(entry["std_translation_m"])
         sd_r = np.array(entry["std_rotation_deg"])
+        plain = "[{:.4f}, {:.4f}, {:.4f}]"
         lines.append(
-            f"  1-sigma           translation {fmt.format(*sd_t)} cm, "
-            f"rotation {fmt.format(*sd_r)} deg"
+            f"  1-sigma (noise)   translation {plain.format(*sd_t)} cm, "
+            f"rotation {plain.format(*sd_r)} deg"
         )
     rmse = ", ".join(f"{100 * r:.2f}" for r in entry["rmse"])
     lines.append(f"  feature rmse cm   {rmse}")
@@ -324,14 +363,9 @@ def _plot(
         raise click.ClickException(f"{png}: {e}") from e
 
 
-def _frame_name(path: Path) -> str:
-    cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in path.stem)
-    return cleaned or "frame"
-
-
 @main.command()
-@click.argument("reference", type=click.Path(exists=True, path_type=Path))
-@click.argument("targets", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
+@click.argument("reference", type=SourceType())
+@click.argument("targets", nargs=-1, required=True, type=SourceType())
 @click.option(
     "--method",
     type=click.Choice(["planes", "poles"]),
@@ -390,8 +424,8 @@ def _frame_name(path: Path) -> str:
     '{"results": [...]} for several.',
 )
 def calibrate(
-    reference: Path,
-    targets: tuple[Path, ...],
+    reference: Source,
+    targets: tuple[Source, ...],
     method: str,
     crop: str | None,
     up: str | None,
@@ -408,13 +442,14 @@ def calibrate(
     """Calibrate each TARGET cloud to the REFERENCE cloud, with no initial guess.
 
     The result is the 4x4 transform reference_from_target: p_reference = R p_target + t.
-    Files may be PCD, PLY, KITTI .bin, .npy, CSV/TXT, or ROS bags (--topic, --time).
+    Files may be PCD, PLY, KITTI .bin, .npy, CSV/TXT, or ROS bags: BAG:/topic picks a topic
+    (or --topic for all bags), --time the frame.
 
     \b
     Examples:
       lidarcal calibrate top.pcd front.pcd --up 0,0,1 --output front.yaml --plot front.png
       lidarcal calibrate top.pcd left.pcd right.pcd --crop -20,20,-20,20,-3,10 --json
-      lidarcal calibrate ref.bag tgt.bag --topic /points --method poles --vendor hesai
+      lidarcal calibrate drive.bag:/top/points drive.bag:/left/points --time 12.5
 
     Exits with status 1 and a one-line message if a calibration fails; the other targets are
     still calibrated and reported.
@@ -448,14 +483,14 @@ def calibrate(
     failures: list[str] = []
     show_progress = len(targets) > 1 and sys.stderr.isatty()
     with contextlib.ExitStack() as stack:
-        items: Iterable[Path] = targets
+        items: Iterable[Source] = targets
         if show_progress:
             items = stack.enter_context(
                 click.progressbar(
                     targets,
                     label="calibrating",
                     file=sys.stderr,
-                    item_show_func=lambda p: p.name if p is not None else None,
+                    item_show_func=lambda p: p.text if p is not None else None,
                 )
             )
         for target in items:
@@ -463,18 +498,25 @@ def calibrate(
                 tgt_points = load_cloud(target, crop_box, topic, bag_time)
                 result = _calibrate(method, ref_points, tgt_points, options)
             except (ValueError, OSError, CalibrationError) as e:
-                failures.append(f"{target}: {e}")
+                failures.append(f"{target.text}: {e}")
                 entries.append(
-                    {"reference": str(reference), "target": str(target), "error": str(e)}
+                    {"reference": reference.text, "target": target.text, "error": str(e)}
                 )
                 continue
-            entry = to_dict(result, reference=str(reference), target=str(target))
+            entry = to_dict(
+                result,
+                reference=reference.text,
+                target=target.text,
+                reference_frame=reference.frame,
+                target_frame=target.frame,
+            )
             entries.append(entry)
             if plot is not None:
                 png = plot
                 if len(targets) > 1:
-                    png = plot.with_name(f"{plot.stem}_{_frame_name(target)}{plot.suffix}")
-                _plot(ref_points, tgt_points, result, png, f"{target.name} -> {reference.name}")
+                    png = plot.with_name(f"{plot.stem}_{target.frame}{plot.suffix}")
+                title = f"{target.path.name} -> {reference.path.name}"
+                _plot(ref_points, tgt_points, result, png, title)
                 entry["plot"] = str(png)
 
     good = [e for e in entries if "error" not in e]
@@ -487,7 +529,7 @@ def calibrate(
         click.echo(json.dumps(entries[0] if len(entries) == 1 else {"results": entries}))
     else:
         for entry in good:
-            click.echo(_summary(entry, _frame_name(reference), _frame_name(Path(entry["target"]))))
+            click.echo(_summary(entry, entry["reference_frame"], entry["target_frame"]))
         if output is not None and good:
             click.echo(f"wrote {output}")
     for message in failures:

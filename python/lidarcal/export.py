@@ -99,14 +99,20 @@ def to_dict(
     *,
     reference: str | None = None,
     target: str | None = None,
+    reference_frame: str | None = None,
+    target_frame: str | None = None,
 ) -> dict[str, Any]:
-    """A JSON-ready summary of ``result``; ``reference`` / ``target`` name the frames or files."""
+    """A JSON-ready summary of ``result``. ``reference`` / ``target`` name the clouds (files);
+    ``reference_frame`` / ``target_frame`` are the frame ids for URDF and tf (default: the files'
+    stems, cleaned to letters, digits and ``_``)."""
     t = np.asarray(result.transform)
     rotation, translation = t[:3, :3], t[:3, 3]
     angles = rpy(rotation)
     out: dict[str, Any] = {
         "reference": reference,
         "target": target,
+        "reference_frame": reference_frame or _frame(reference, "reference"),
+        "target_frame": target_frame or _frame(target, "target"),
         "method": result.method,
         "transform": t.tolist(),
         "translation": translation.tolist(),
@@ -233,8 +239,8 @@ def static_transform_publisher(
 
 
 def _urdf(entries: Sequence[dict[str, Any]]) -> str:
-    parent = _frame(entries[0]["reference"], "reference")
-    links = [parent] + [_frame(e["target"], f"target_{i}") for i, e in enumerate(entries)]
+    parent = entries[0]["reference_frame"]
+    links = [parent] + [e["target_frame"] for e in entries]
     lines = ['<?xml version="1.0"?>', '<robot name="lidarcal_calibration">']
     lines += [f"  <link name={quoteattr(name)}/>" for name in dict.fromkeys(links)]
     for child, e in zip(links[1:], entries, strict=True):

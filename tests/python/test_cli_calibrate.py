@@ -316,6 +316,14 @@ def test_read_bag_by_topic_and_time(tmp_path: Path, ros1: bool) -> None:
     np.testing.assert_array_equal(third, clouds[2].astype(np.float32).astype(np.float64))
     with pytest.raises(ValueError, match="name the topic"):
         read_bag(path)
+    # The command line takes BAG:/topic (ROS 2 bags are folders).
+    res = CliRunner().invoke(
+        main, ["calibrate", f"{path}:/points", f"{path}:/other", "--time", "1", "--json"]
+    )
+    assert "no such file" not in res.output
+    assert json.loads(res.stdout)["target"] == f"{path}:/other"  # (a blob: it fails to calibrate)
+    res = CliRunner().invoke(main, ["calibrate", f"{path}:/points", str(tmp_path / "nope.pcd")])
+    assert res.exit_code == 2 and "nope.pcd: no such file" in res.output
     with pytest.raises(ValueError, match="no PointCloud2 topic '/nope'"):
         read_bag(path, "/nope")
     with pytest.raises(FileNotFoundError):
