@@ -14,7 +14,8 @@ array, which is what a calibration needs:
 
 Time is the median of ``--repeats`` reads after one warm-up read (the file is in the page
 cache); peak memory is the peak resident set over the reads (``VmHWM`` after resetting it through
-``/proc/self/clear_refs``, Linux) minus the resident set after importing the library. Both are printed with the ratio to lidarcal.
+``/proc/self/clear_refs``, Linux) minus the resident set after importing the library. Times are
+printed with their ratio to lidarcal's.
 
 Usage:
 

@@ -424,8 +424,15 @@ fn decompress(data: &[u8], expected: usize) -> Result<Vec<u8>> {
         )));
     }
     let out = lzf::decompress(&body[..compressed], expected).map_err(|e| {
+        let why = match e {
+            lzf::LzfError::BufferTooSmall => "it expands past the declared size".to_string(),
+            lzf::LzfError::DataCorrupted => {
+                "a back reference points before the start, or the stream ends mid-token".into()
+            }
+            other => format!("{other:?}"),
+        };
         bad(format!(
-            "corrupt LZF block in binary_compressed data ({e:?})"
+            "corrupt LZF block in binary_compressed data: {why}"
         ))
     })?;
     if out.len() != expected {
