@@ -240,9 +240,15 @@ def static_transform_publisher(
 
 def _urdf(entries: Sequence[dict[str, Any]]) -> str:
     parent = entries[0]["reference_frame"]
-    links = [parent] + [e["target_frame"] for e in entries]
+    # Link and joint names must be unique: number repeated frames (two files with one stem).
+    links = [parent]
+    for e in entries:
+        name, k = e["target_frame"], 2
+        while name in links:
+            name, k = f"{e['target_frame']}_{k}", k + 1
+        links.append(name)
     lines = ['<?xml version="1.0"?>', '<robot name="lidarcal_calibration">']
-    lines += [f"  <link name={quoteattr(name)}/>" for name in dict.fromkeys(links)]
+    lines += [f"  <link name={quoteattr(name)}/>" for name in links]
     for child, e in zip(links[1:], entries, strict=True):
         xyz = " ".join(f"{v:.9g}" for v in e["translation"])
         angles = " ".join(f"{v:.9g}" for v in e["rpy_rad"])

@@ -85,6 +85,22 @@ def test_calibrate_json_yaml_txt_urdf(tmp_path: Path, corner_files: tuple) -> No
     assert parent is not None and parent.get("link") == "ref"
 
 
+def test_urdf_names_are_unique(tmp_path: Path, corner_files: tuple) -> None:
+    ref, tgt, _ = corner_files
+    again = tmp_path / "tgt.npy"  # the same stem as tgt.ply
+    np.save(again, lidarcal.read_points(tgt))
+    out = tmp_path / "rig.urdf"
+    res = CliRunner().invoke(
+        main, ["calibrate", str(ref), str(tgt), str(again), "--up", "0,0,1", "--output", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    root = ET.parse(out).getroot()
+    links = [link.get("name") for link in root.findall("link")]
+    joints = [joint.get("name") for joint in root.findall("joint")]
+    assert links == ["ref", "tgt", "tgt_2"]
+    assert len(set(joints)) == 2
+
+
 def test_text_output_prints_the_tf_command(corner_files: tuple) -> None:
     ref, tgt, _ = corner_files
     res = CliRunner().invoke(main, ["calibrate", str(ref), str(tgt), "--up", "0,0,1"])
