@@ -43,8 +43,17 @@ fn explore_real() {
 fn explore_sim() {
     for seed in 0..4 {
         for side in [Side::Left, Side::Right] {
-            let scene = street_scene(&StreetOptions { seed, side, ..StreetOptions::default() }).unwrap();
-            let r = calibrate_targetless(&scene.reference.positions(), &scene.target.positions(), &TargetlessOptions::default());
+            let scene = street_scene(&StreetOptions {
+                seed,
+                side,
+                ..StreetOptions::default()
+            })
+            .unwrap();
+            let r = calibrate_targetless(
+                &scene.reference.positions(),
+                &scene.target.positions(),
+                &TargetlessOptions::default(),
+            );
             match r {
                 Ok(r) => {
                     let (a, d) = pose_error(&scene.reference_from_target, &r.reference_from_target);
@@ -55,8 +64,18 @@ fn explore_sim() {
         }
     }
     let scene = corridor_scene(0).unwrap();
-    let r = calibrate_targetless(&scene.reference.positions(), &scene.target.positions(), &TargetlessOptions::default());
-    println!("corridor: {:?}", r.map(|r| (pose_error(&scene.reference_from_target, &r.reference_from_target), r.weakest_translation)));
+    let r = calibrate_targetless(
+        &scene.reference.positions(),
+        &scene.target.positions(),
+        &TargetlessOptions::default(),
+    );
+    println!(
+        "corridor: {:?}",
+        r.map(|r| (
+            pose_error(&scene.reference_from_target, &r.reference_from_target),
+            r.weakest_translation
+        ))
+    );
 }
 
 #[test]
@@ -74,7 +93,14 @@ fn explore_planes() {
             common::reference_extrinsic(&dir, &[&scene, &format!("{side}_to_top")])
         };
         let pts = common::load_npy_xyz(&base.join(format!("{side}.npy")));
-        let (f, t) = lidarcal::calib::targetless::plane_features(&pts, &TargetlessOptions { max_planes: 14, ..TargetlessOptions::default() }).unwrap();
+        let (f, t) = lidarcal::calib::targetless::plane_features(
+            &pts,
+            &TargetlessOptions {
+                max_planes: 14,
+                ..TargetlessOptions::default()
+            },
+        )
+        .unwrap();
         println!("{side} threshold {t:.3}");
         for p in f {
             let q = p.plane.transformed(&truth);

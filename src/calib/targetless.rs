@@ -99,7 +99,7 @@ pub const DISTINCT_DISTANCE: f64 = 0.3;
 /// A verified target point agrees when a reference point lies within this distance (metres).
 pub const VERIFY_DISTANCE: f64 = 0.25;
 /// Target points (at most, by a fixed stride) scored in the verification.
-pub const VERIFY_SAMPLES: usize = 1000;
+pub const VERIFY_SAMPLES: usize = 800;
 /// Bounds of the inlier threshold taken from the noise estimate (metres). Road scenes are not
 /// flat (camber, kerbs, pavements): when the estimate fails or exceeds the upper bound, the upper
 /// bound is used.
@@ -364,8 +364,7 @@ pub fn segment_planes(
     let mut keys: Vec<[i64; 3]> = cells.keys().copied().collect();
     keys.sort_unstable();
     let mut patches: Vec<Patch> = Vec::new();
-    let mut patch_of: std::collections::HashMap<[i64; 3], usize> =
-        std::collections::HashMap::new();
+    let mut patch_of: std::collections::HashMap<[i64; 3], usize> = std::collections::HashMap::new();
     for key in &keys {
         let Some(indices) = cells.remove(key) else {
             continue;
@@ -432,7 +431,8 @@ pub fn segment_planes(
                         }
                         let p = &patches[j];
                         let aligned = p.normal.dot(&plane.normal).abs() > GROW_ANGLE.cos();
-                        let near = plane.signed_distance(&p.centroid).abs() < GROW_OFFSET * threshold;
+                        let near =
+                            plane.signed_distance(&p.centroid).abs() < GROW_OFFSET * threshold;
                         if aligned && near {
                             assigned[j] = true;
                             region.push(j);
@@ -454,14 +454,19 @@ pub fn segment_planes(
         if candidates.len() < min_inliers {
             continue;
         }
-        let Ok(fit) = Moments::from_points(candidates.iter().filter_map(|&i| points.get(i))).plane()
+        let Ok(fit) =
+            Moments::from_points(candidates.iter().filter_map(|&i| points.get(i))).plane()
         else {
             continue;
         };
         let plane = fit.plane.oriented_toward(&Point3::origin());
         let mut voxels: Vec<usize> = candidates
             .into_iter()
-            .filter(|&i| points.get(i).is_some_and(|p| plane.signed_distance(p).abs() < threshold))
+            .filter(|&i| {
+                points
+                    .get(i)
+                    .is_some_and(|p| plane.signed_distance(p).abs() < threshold)
+            })
             .collect();
         voxels.sort_unstable();
         if voxels.len() < min_inliers {
@@ -665,11 +670,7 @@ fn agreeing(
     out
 }
 
-fn support(
-    reference: &[PlaneFeature],
-    target: &[PlaneFeature],
-    matches: &[(usize, usize)],
-) -> f64 {
+fn support(reference: &[PlaneFeature], target: &[PlaneFeature], matches: &[(usize, usize)]) -> f64 {
     matches
         .iter()
         .filter_map(|&(i, j)| Some((reference.get(i)?.voxels.len(), target.get(j)?.voxels.len())))
@@ -684,14 +685,17 @@ fn hypotheses(
     options: &TargetlessOptions,
 ) -> (usize, Vec<Candidate>) {
     let tol = options.normal_tolerance;
-    let n_ref: Vec<Vector3<f64>> = reference.iter().map(|f| f.plane.normal.into_inner()).collect();
+    let n_ref: Vec<Vector3<f64>> = reference
+        .iter()
+        .map(|f| f.plane.normal.into_inner())
+        .collect();
     let n_tgt: Vec<Vector3<f64>> = target.iter().map(|f| f.plane.normal.into_inner()).collect();
     let mut raw: Vec<Candidate> = Vec::new();
     let mut enumerated = 0usize;
     'outer: for i in 0..n_ref.len() {
         for j in (i + 1)..n_ref.len() {
             let angle_ref = angle_between(&n_ref[i], &n_ref[j]);
-            if angle_ref < MIN_PAIR_ANGLE || angle_ref > std::f64::consts::PI - MIN_PAIR_ANGLE {
+            if !(MIN_PAIR_ANGLE..=std::f64::consts::PI - MIN_PAIR_ANGLE).contains(&angle_ref) {
                 continue;
             }
             for k in 0..n_tgt.len() {
@@ -707,7 +711,10 @@ fn hypotheses(
                     let r = solution.rotation;
                     let d = |f: &PlaneFeature| f.plane.offset;
                     let mut rows = vec![n_ref[i], n_ref[j]];
-                    let mut rhs = vec![d(&target[k]) - d(&reference[i]), d(&target[l]) - d(&reference[j])];
+                    let mut rhs = vec![
+                        d(&target[k]) - d(&reference[i]),
+                        d(&target[l]) - d(&reference[j]),
+                    ];
                     let span = a[2];
                     let mut thirds = 0;
                     for m in 0..n_tgt.len() {
@@ -791,7 +798,7 @@ fn verify_icp_options() -> IcpOptions {
         min_distance: 0.3,
         shrink: 0.7,
         max_iterations: 6,
-        samples: 500,
+        samples: 400,
         step_tolerance: 1e-4,
     }
 }
@@ -816,15 +823,10 @@ pub fn calibrate_targetless(
     let mut clock = Stopwatch::start();
 
     #[cfg(feature = "parallel")]
-    let (ref_result, tgt_result) = rayon::join(
-        || prepare(reference, options),
-        || prepare(target, options),
-    );
+    let (ref_result, tgt_result) =
+        rayon::join(|| prepare(reference, options), || prepare(target, options));
     #[cfg(not(feature = "parallel"))]
-    let (ref_result, tgt_result) = (
-        prepare(reference, options),
-        prepare(target, options),
-    );
+    let (ref_result, tgt_result) = (prepare(reference, options), prepare(target, options));
     let (reference_ds, target_ds) = (ref_result?, tgt_result?);
     clock.lap("planes");
     for (prepared, which) in [(&reference_ds, "reference"), (&target_ds, "target")] {
@@ -989,7 +991,13 @@ pub fn calibrate_targetless(
             fmt(&weakest_translation.0),
             100.0 * weakest_translation.1,
             100.0 * options.min_information_share,
-            if plane_translation_share > 1e-3 { 3 } else if matches.len() > 1 { 2 } else { 1 },
+            if plane_translation_share > 1e-3 {
+                3
+            } else if matches.len() > 1 {
+                2
+            } else {
+                1
+            },
         )));
     }
     if weakest_rotation.1 < options.min_information_share {

@@ -905,7 +905,11 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
             Shape::rectangle(*r, intensity)
         })
         .collect();
-    shapes.extend(boxes.iter().map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER)));
+    shapes.extend(
+        boxes
+            .iter()
+            .map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER)),
+    );
     shapes.extend(cylinders.iter().map(|c| Shape::cylinder(*c, POLE_PAINT)));
     let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
     let reference = scan(

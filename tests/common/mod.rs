@@ -182,7 +182,12 @@ pub fn require_sensors_calibration() -> Option<std::path::PathBuf> {
 /// The first three columns of a little-endian float32 `.npy` array of shape `(N, C)`, `C >= 3`.
 pub fn load_npy_xyz(path: &std::path::Path) -> Vec<Point3<f64>> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(&bytes[..6], b"\x93NUMPY", "{} is not an npy file", path.display());
+    assert_eq!(
+        &bytes[..6],
+        b"\x93NUMPY",
+        "{} is not an npy file",
+        path.display()
+    );
     let (header_len, start) = if bytes[6] == 1 {
         (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10)
     } else {
