@@ -36,7 +36,6 @@ Bad input raises ``ValueError`` naming the problem; a calibration that cannot be
 """
 
 from lidarcal import metrics, sim  # `from lidarcal import sim` / `metrics`
-from lidarcal.calibrate import RigCalibration, RigEdge, calibrate, calibrate_rig
 from lidarcal._lidarcal import (
     CalibrationError,
     CalibrationResult,
@@ -58,6 +57,7 @@ from lidarcal._lidarcal import (
     so3_exp,
     so3_log,
 )
+from lidarcal.calibrate import RigCalibration, RigEdge, calibrate, calibrate_rig
 
 __all__ = [
     "CalibrationError",

@@ -223,7 +223,10 @@ def calibrate_rig(
                 except CalibrationError as e:
                     failures[(a, b)] = str(e)
                     continue
-                if overlap(clouds[a], clouds[b], r.transform, AGREEMENT_DISTANCE) < MIN_PAIR_OVERLAP:
+                if (
+                    overlap(clouds[a], clouds[b], r.transform, AGREEMENT_DISTANCE)
+                    < MIN_PAIR_OVERLAP
+                ):
                     failures[(a, b)] = "the two units barely overlap under the result"
                     continue
                 measured.append((a, b, r))
@@ -249,15 +252,15 @@ def calibrate_rig(
     refined = _refine_graph(poses, graph)
     edges = []
     for a, b, r in measured:
-        e = _edge_error(r.transform, refined[a], refined[b])
+        err = _edge_error(r.transform, refined[a], refined[b])
         edges.append(
             RigEdge(
                 a=a,
                 b=b,
                 method=r.method,
                 a_from_b=r.transform,
-                rotation_residual_deg=float(np.degrees(np.linalg.norm(e[3:]))),
-                translation_residual_m=float(np.linalg.norm(e[:3])),
+                rotation_residual_deg=float(np.degrees(np.linalg.norm(err[3:]))),
+                translation_residual_m=float(np.linalg.norm(err[:3])),
             )
         )
     return RigCalibration(
