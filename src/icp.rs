@@ -479,8 +479,6 @@ mod tests {
         let (dir, share) = r.weakest_translation();
         assert!(share < 1e-6, "{share}");
         assert!(dir.x.abs() > 0.999, "{dir}");
-        let (_, rot_share) = r.weakest_rotation();
-        assert!(rot_share > 0.01, "{rot_share}");
     }
 
     #[test]
