@@ -65,6 +65,7 @@ pub mod cluster;
 pub mod error;
 pub mod fit;
 pub mod geometry;
+pub mod icp;
 pub mod kabsch;
 pub mod lm;
 pub mod metrics;

@@ -9,6 +9,13 @@ Calibration:
   initial guess and any mounting; returns a :class:`CalibrationResult`.
 * :func:`calibrate_poles` -- from two (or more) non-parallel poles wrapped in retro-reflective
   tape, from ``(N, 4)`` clouds with intensity; returns the same :class:`CalibrationResult`.
+* :func:`calibrate_targetless` -- from the planes of an ordinary scene (a street with facades),
+  no target and no initial guess: plane pairs/triplets matched by their angles, verified and
+  refined by point-to-plane ICP; refuses scenes that leave a direction unobserved.
+* :func:`calibrate` -- one entry point: ``method="auto"`` tries the corner, the targetless and
+  (with intensity) the pole method and keeps the best; ``result.method`` names it.
+* :func:`calibrate_rig` -- several targets to one reference plus target-to-target edges, made
+  consistent by a pose-graph refinement; returns a :class:`RigCalibration`.
 * :mod:`lidarcal.metrics` -- :func:`lidarcal.metrics.rqe`, the Renyi quadratic entropy
   crispness for comparing calibrations without ground truth.
 
@@ -44,6 +51,7 @@ from lidarcal._lidarcal import (
     __version__,
     calibrate_planes,
     calibrate_poles,
+    calibrate_targetless,
     extract_planes,
     kabsch,
     ransac_line,
@@ -57,6 +65,7 @@ from lidarcal._lidarcal import (
     so3_log,
     write_points,
 )
+from lidarcal.calibrate import RigCalibration, RigEdge, calibrate, calibrate_rig
 
 __all__ = [
     "CalibrationError",
@@ -65,9 +74,14 @@ __all__ = [
     "Line",
     "Plane",
     "RefineResult",
+    "RigCalibration",
+    "RigEdge",
     "__version__",
+    "calibrate",
     "calibrate_planes",
     "calibrate_poles",
+    "calibrate_rig",
+    "calibrate_targetless",
     "extract_planes",
     "kabsch",
     "metrics",

@@ -74,14 +74,15 @@ class RefineResult:
 class CalibrationResult:
     """The result of a calibration: ``transform`` maps target points into the reference frame.
 
-    Common to both methods: ``method`` ("planes" or "poles"), ``transform``,
+    Common to all methods: ``method`` ("planes", "poles" or "targetless"), ``transform``,
     ``initial_transform``, ``converged``, ``iterations``, ``cost``, ``termination``, ``rmse``,
     ``inlier_counts``, ``inliers_reference``, ``inliers_target``, ``covariance``, ``timings``.
-    Plane-only attributes are None for poles and pole-only attributes None for planes.
+    Attributes of one method are None for the others (``planes_reference``,
+    ``planes_target`` and ``distance_thresholds`` serve the corner and the targetless method).
     """
 
     @property
-    def method(self) -> Literal["planes", "poles"]: ...
+    def method(self) -> Literal["planes", "poles", "targetless"]: ...
     @property
     def transform(self) -> F64Array:
         """(4, 4) ``reference_from_target``."""
@@ -144,7 +145,40 @@ class CalibrationResult:
     def hypothesis_margin(self) -> float | None: ...
     @property
     def ambiguous(self) -> bool | None: ...
+    # Targetless only (None for the others).
+    @property
+    def matched_planes(self) -> int | None: ...
+    @property
+    def plane_counts(self) -> tuple[int, int] | None: ...
+    @property
+    def hypothesis_counts(self) -> tuple[int, int] | None: ...
+    @property
+    def best_score(self) -> float | None: ...
+    @property
+    def second_score(self) -> float | None: ...
+    @property
+    def triplet(self) -> bool | None: ...
+    @property
+    def weakest_translation(self) -> tuple[F64Array, float] | None:
+        """(direction in the reference frame, share of the translation information)."""
+    @property
+    def icp_fitness(self) -> float | None: ...
 
+def calibrate_targetless(
+    reference: ArrayLike,
+    target: ArrayLike,
+    *,
+    distance_threshold: float | None = None,
+    voxel_size: float = 0.1,
+    max_planes: int = 10,
+    max_translation: float = 5.0,
+    icp: bool = True,
+    min_information_share: float = 0.01,
+    seed: int = 0,
+) -> CalibrationResult: ...
+def overlap(
+    reference: ArrayLike, target: ArrayLike, transform: ArrayLike, distance: float = 0.25
+) -> float: ...
 def calibrate_planes(
     reference: ArrayLike,
     target: ArrayLike,
@@ -399,6 +433,16 @@ def sim_poles_scene(
     max_tilt_deg: float = 15.0,
     target_upside_down: bool = False,
 ) -> Scene: ...
+def sim_street_scene(
+    *,
+    seed: int = 0,
+    side: Literal["left", "right"] = "left",
+    target_tilt_deg: float = 45.0,
+    clutter: bool = True,
+    cross_wall: bool = False,
+    noise: float | None = None,
+) -> Scene: ...
+def sim_corridor_scene(*, seed: int = 0) -> Scene: ...
 def sim_paper_scene(
     *, alpha_deg: float = 90.0, configuration: int | None = 1, seed: int = 0
 ) -> Scene: ...

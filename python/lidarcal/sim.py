@@ -32,9 +32,11 @@ from lidarcal._lidarcal import (
     Scene,
     Shape,
     sim_corner_scene,
+    sim_corridor_scene,
     sim_paper_scene,
     sim_poles_scene,
     sim_scan,
+    sim_street_scene,
     write_pcd,
 )
 
@@ -44,12 +46,14 @@ __all__ = [
     "Scene",
     "Shape",
     "corner_scene",
+    "corridor_scene",
     "cuboid",
     "cylinder",
     "paper_scene",
     "poles_scene",
     "rectangle",
     "scan",
+    "street_scene",
     "write_pcd",
 ]
 
@@ -208,6 +212,36 @@ def poles_scene(
         max_tilt_deg=max_tilt_deg,
         target_upside_down=target_upside_down,
     )
+
+
+def street_scene(
+    *,
+    seed: int = 0,
+    side: str = "left",
+    target_tilt_deg: float = 45.0,
+    clutter: bool = True,
+    cross_wall: bool = False,
+    noise: float | None = None,
+) -> Scene:
+    """A street (road, kerbs, pavements, facades with gaps; parked cars, trees and poles with
+    ``clutter``) scanned by a roof HDL-64E (the reference) and a wide-angle side unit tilted
+    ``target_tilt_deg`` down on the ``side`` ("left" or "right"), as on the real road rigs."""
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    return sim_street_scene(
+        seed=seed,
+        side="left" if side == "left" else "right",
+        target_tilt_deg=target_tilt_deg,
+        clutter=clutter,
+        cross_wall=cross_wall,
+        noise=noise,
+    )
+
+
+def corridor_scene(seed: int = 0) -> Scene:
+    """A floor and two parallel walls longer than the sensors' range: the translation along the
+    corridor is unobservable, and :func:`lidarcal.calibrate_targetless` must refuse it."""
+    return sim_corridor_scene(seed=seed)
 
 
 def paper_scene(alpha_deg: float = 90.0, configuration: int | None = 1, seed: int = 0) -> Scene:

@@ -4,9 +4,13 @@
 //!   without an initial guess and for any mounting orientation.
 //! * [`poles`]: two or more non-parallel poles wrapped in retro-reflective tape (seed 003), with
 //!   the cylinder axis instead of the centroid line and a scored choice among the 8 hypotheses.
+//! * [`targetless`]: the planes of an ordinary scene (a street), matched by plane pairs and
+//!   triplets without an initial guess, verified and refined by point-to-plane ICP; refuses
+//!   scenes that leave a degree of freedom unobserved.
 
 pub mod planes;
 pub mod poles;
+pub mod targetless;
 
 use std::time::Instant;
 

@@ -15,6 +15,9 @@ use crate::calib::planes::{
 use crate::calib::poles::{
     calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
 };
+use crate::calib::targetless::{
+    calibrate_targetless as rs_calibrate_targetless, TargetlessCalibration, TargetlessOptions,
+};
 use crate::calib::Timings;
 use crate::geometry::Plane;
 use crate::lm::{LmOptions, LmReport, Loss};
@@ -23,6 +26,7 @@ use crate::lm::{LmOptions, LmReport, Loss};
 enum Inner {
     Planes(Box<PlanarCalibration>),
     Poles(Box<PoleCalibration>),
+    Targetless(Box<TargetlessCalibration>),
 }
 
 /// The result of a calibration: `transform` maps target points into the reference frame.
@@ -35,43 +39,54 @@ impl CalibrationResult {
     fn planes(&self) -> Option<&PlanarCalibration> {
         match &self.inner {
             Inner::Planes(p) => Some(p),
-            Inner::Poles(_) => None,
+            _ => None,
         }
     }
     fn poles(&self) -> Option<&PoleCalibration> {
         match &self.inner {
             Inner::Poles(p) => Some(p),
-            Inner::Planes(_) => None,
+            _ => None,
+        }
+    }
+    fn targetless(&self) -> Option<&TargetlessCalibration> {
+        match &self.inner {
+            Inner::Targetless(p) => Some(p),
+            _ => None,
         }
     }
     fn pose(&self) -> &Isometry3<f64> {
         match &self.inner {
             Inner::Planes(p) => &p.reference_from_target,
             Inner::Poles(p) => &p.reference_from_target,
+            Inner::Targetless(p) => &p.reference_from_target,
         }
     }
     fn initial_pose(&self) -> &Isometry3<f64> {
         match &self.inner {
             Inner::Planes(p) => &p.initial_reference_from_target,
             Inner::Poles(p) => &p.initial_reference_from_target,
+            Inner::Targetless(p) => &p.initial_reference_from_target,
         }
     }
     fn report(&self) -> Option<&LmReport> {
         match &self.inner {
             Inner::Planes(p) => p.report.as_ref(),
             Inner::Poles(p) => p.report.as_ref(),
+            Inner::Targetless(p) => p.report.as_ref(),
         }
     }
     fn stage_timings(&self) -> &Timings {
         match &self.inner {
             Inner::Planes(p) => &p.timings,
             Inner::Poles(p) => &p.timings,
+            Inner::Targetless(p) => &p.timings,
         }
     }
     fn rmse_values(&self) -> Vec<f64> {
         match &self.inner {
             Inner::Planes(p) => p.rmse.to_vec(),
             Inner::Poles(p) => p.pole_rmse.clone(),
+            Inner::Targetless(p) => p.rmse.clone(),
         }
     }
 }
@@ -96,13 +111,13 @@ fn lines_k6<'py>(
     to_numpy(py, Ix2(lines.len(), 6), data)
 }
 
-/// (3, 4) rows [nx, ny, nz, d].
-fn planes_array<'py>(py: Python<'py>, planes: &[Plane; 3]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+/// (K, 4) rows [nx, ny, nz, d].
+fn planes_array<'py>(py: Python<'py>, planes: &[Plane]) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let data = planes
         .iter()
         .flat_map(|p| p.coefficients().as_slice().to_vec())
         .collect();
-    to_numpy(py, Ix2(3, 4), data)
+    to_numpy(py, Ix2(planes.len(), 4), data)
 }
 
 fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -111,12 +126,13 @@ fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, P
 
 #[pymethods]
 impl CalibrationResult {
-    /// "planes" or "poles".
+    /// "planes", "poles" or "targetless".
     #[getter]
     fn method(&self) -> &'static str {
         match self.inner {
             Inner::Planes(_) => "planes",
             Inner::Poles(_) => "poles",
+            Inner::Targetless(_) => "targetless",
         }
     }
     /// (4, 4) reference_from_target: p_ref = R @ p_tgt + t.
@@ -156,24 +172,80 @@ impl CalibrationResult {
         let v = self.rmse_values();
         to_numpy(py, Ix1(v.len()), v)
     }
-    /// (3, 4) matched planes [nx, ny, nz, d] in the reference frame (normals toward the sensor);
-    /// None for poles.
+    /// (3, 4) (corner) or (K, 4) (targetless) matched planes [nx, ny, nz, d] in the reference
+    /// frame (normals toward the sensor); None for poles.
     #[getter]
     fn planes_reference<'py>(
         &self,
         py: Python<'py>,
     ) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.planes()
-            .map(|p| planes_array(py, &p.planes_reference))
-            .transpose()
+        match &self.inner {
+            Inner::Planes(p) => planes_array(py, &p.planes_reference).map(Some),
+            Inner::Targetless(p) => planes_array(py, &p.planes_reference).map(Some),
+            Inner::Poles(_) => Ok(None),
+        }
     }
-    /// (3, 4) matched planes in the target frame, row i matching planes_reference[i]; None for
-    /// poles.
+    /// Matched planes in the target frame, row i matching planes_reference[i]; None for poles.
     #[getter]
     fn planes_target<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.planes()
-            .map(|p| planes_array(py, &p.planes_target))
+        match &self.inner {
+            Inner::Planes(p) => planes_array(py, &p.planes_target).map(Some),
+            Inner::Targetless(p) => planes_array(py, &p.planes_target).map(Some),
+            Inner::Poles(_) => Ok(None),
+        }
+    }
+    /// Number of matched planes (targetless only, else None).
+    #[getter]
+    fn matched_planes(&self) -> Option<usize> {
+        self.targetless().map(|t| t.planes_reference.len())
+    }
+    /// (2,) planes extracted from the reference and the target cloud (targetless only).
+    #[getter]
+    fn plane_counts(&self) -> Option<(usize, usize)> {
+        self.targetless()
+            .map(|t| (t.features[0].len(), t.features[1].len()))
+    }
+    /// (enumerated, distinct) plane-pair/triplet hypotheses (targetless only).
+    #[getter]
+    fn hypothesis_counts(&self) -> Option<(usize, usize)> {
+        self.targetless()
+            .map(|t| (t.hypotheses[0], t.hypotheses[1]))
+    }
+    /// Verification score (fraction of target points agreeing) of the best hypothesis
+    /// (targetless only).
+    #[getter]
+    fn best_score(&self) -> Option<f64> {
+        self.targetless().map(|t| t.best_score)
+    }
+    /// Best verification score of a hypothesis ending at a different pose (targetless only).
+    #[getter]
+    fn second_score(&self) -> Option<f64> {
+        self.targetless().map(|t| t.second_score)
+    }
+    /// Whether the winning hypothesis was a plane triplet rather than a pair (targetless only).
+    #[getter]
+    fn triplet(&self) -> Option<bool> {
+        self.targetless().map(|t| t.triplet)
+    }
+    /// ((3,) direction in the reference frame, share of the information) of the least
+    /// constrained translation (targetless only).
+    #[getter]
+    fn weakest_translation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<(Bound<'py, PyArray1<f64>>, f64)>> {
+        self.targetless()
+            .map(|t| {
+                let (v, share) = t.weakest_translation;
+                Ok((to_numpy(py, Ix1(3), v.as_slice().to_vec())?, share))
+            })
             .transpose()
+    }
+    /// Fraction of the sampled target points with an ICP correspondence at the final distance
+    /// (targetless with ICP only).
+    #[getter]
+    fn icp_fitness(&self) -> Option<f64> {
+        self.targetless().and_then(|t| t.icp.map(|r| r.fitness))
     }
     /// (2, K) points per matched feature: row 0 reference, row 1 target (K = 3 planes or the
     /// matched poles).
@@ -240,9 +312,12 @@ impl CalibrationResult {
         &self,
         py: Python<'py>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        self.planes()
-            .map(|p| to_numpy(py, Ix1(2), p.distance_thresholds.to_vec()))
-            .transpose()
+        let t = match &self.inner {
+            Inner::Planes(p) => p.distance_thresholds,
+            Inner::Targetless(p) => p.distance_thresholds,
+            Inner::Poles(_) => return Ok(None),
+        };
+        to_numpy(py, Ix1(2), t.to_vec()).map(Some)
     }
     /// (K, 6) matched pole axes [point, unit direction] in the reference frame; None for planes.
     #[getter]
@@ -345,6 +420,7 @@ impl CalibrationResult {
         let c = match &self.inner {
             Inner::Planes(p) => p.covariance,
             Inner::Poles(p) => p.covariance,
+            Inner::Targetless(p) => p.covariance,
         };
         c.map(|c| to_numpy(py, Ix2(6, 6), row_major(&c)))
             .transpose()
@@ -371,6 +447,12 @@ impl CalibrationResult {
             .collect();
         let extra = match &self.inner {
             Inner::Planes(_) => String::new(),
+            Inner::Targetless(t) => format!(
+                ", matched_planes={}, best_score={:.3}, second_score={:.3}",
+                t.planes_reference.len(),
+                t.best_score,
+                t.second_score
+            ),
             Inner::Poles(p) => format!(
                 ", poles={}, hypothesis_margin={:.2}, ambiguous={}",
                 p.poles_reference.len(),
@@ -402,6 +484,7 @@ impl CalibrationResult {
         match &self.inner {
             Inner::Planes(p) => (&p.inliers_reference, &p.inliers_target),
             Inner::Poles(p) => (&p.indices_reference, &p.indices_target),
+            Inner::Targetless(p) => (&p.inliers_reference, &p.inliers_target),
         }
     }
 }
@@ -573,6 +656,79 @@ fn calibrate_poles(
     })
 }
 
+/// Calibrates reference_from_target from the planes of an ordinary scene (a street), without an
+/// initial guess: plane pairs and triplets matched by their angles, verified by ICP, refined on
+/// every matched plane and by point-to-plane ICP on the whole clouds.
+///
+/// reference, target: (N, 3) or (N, 4) clouds in their sensors' frames.
+/// distance_threshold: plane inlier distance (m); None estimates it per cloud.
+/// voxel_size: downsampling voxel (m). max_planes: planes per cloud. max_translation: hypotheses
+///     moving the target further (m) are dropped (sensors of one rig are close). icp: run the final
+///     ICP. min_information_share: the weakest direction's share of the information below which
+///     the calibration is refused as unobservable.
+/// Raises CalibrationError naming why (too few planes, nothing verifies, an unconstrained
+/// direction such as the axis of a corridor).
+#[pyfunction]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=0.1, max_planes=10, max_translation=5.0, icp=true, min_information_share=0.01, seed=0))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate_targetless(
+    py: Python<'_>,
+    reference: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    distance_threshold: Option<f64>,
+    voxel_size: f64,
+    max_planes: usize,
+    max_translation: f64,
+    icp: bool,
+    min_information_share: f64,
+    seed: u64,
+) -> PyResult<CalibrationResult> {
+    let reference = arrays::points(reference, "reference")?;
+    let target = arrays::points(target, "target")?;
+    let options = TargetlessOptions {
+        distance_threshold,
+        voxel_size,
+        max_planes,
+        max_translation,
+        icp,
+        min_information_share,
+        seed,
+        ..TargetlessOptions::default()
+    };
+    let inner = run(py, move || {
+        rs_calibrate_targetless(&reference, &target, &options)
+    })?;
+    Ok(CalibrationResult {
+        inner: Inner::Targetless(Box::new(inner)),
+    })
+}
+
+/// Fraction of target points that land within `distance` of a reference point under
+/// `transform` (reference_from_target).
+#[pyfunction]
+#[pyo3(signature = (reference, target, transform, distance=0.25))]
+fn overlap(
+    py: Python<'_>,
+    reference: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    transform: &Bound<'_, PyAny>,
+    distance: f64,
+) -> PyResult<f64> {
+    let reference = arrays::points(reference, "reference")?;
+    let target = arrays::points(target, "target")?;
+    let pose = crate::geometry::isometry_from_matrix(&arrays::matrix4(transform, "transform")?)?;
+    if !(distance.is_finite() && distance > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "distance must be finite and positive, got {distance}"
+        )));
+    }
+    run(py, move || {
+        let surface = crate::icp::SurfaceCloud::new(reference)?;
+        let mapped: Vec<_> = target.iter().map(|p| pose * p).collect();
+        Ok(surface.overlap(&mapped, distance))
+    })
+}
+
 /// Rényi quadratic entropy crispness of a cloud (larger is crisper); see lidarcal.metrics.rqe.
 #[pyfunction]
 fn rqe(py: Python<'_>, points: &Bound<'_, PyAny>, sigma: f64) -> PyResult<f64> {
@@ -584,6 +740,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CalibrationResult>()?;
     m.add_function(wrap_pyfunction!(calibrate_planes, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_poles, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_targetless, m)?)?;
+    m.add_function(wrap_pyfunction!(overlap, m)?)?;
     m.add_function(wrap_pyfunction!(rqe, m)?)?;
     Ok(())
 }

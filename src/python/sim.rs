@@ -11,8 +11,8 @@ use super::arrays::{self, row_major, to_numpy};
 use super::run;
 use crate::geometry;
 use crate::sim::scenes::{
-    corner_scene, paper_scene, poles_scene, CornerOptions, PaperConfiguration, PaperOptions,
-    PolesOptions,
+    corner_scene, corridor_scene, paper_scene, poles_scene, street_scene, CornerOptions,
+    PaperConfiguration, PaperOptions, PolesOptions, Side, StreetOptions,
 };
 use crate::sim::shapes::{self, IntensityRange};
 use crate::sim::{self as core_sim, Scan, ScanOptions};
@@ -426,6 +426,53 @@ fn sim_corner_scene<'py>(
     })
 }
 
+/// The street scene: a roof HDL-64E (reference) and a tilted wide-angle side unit (target).
+#[pyfunction]
+#[pyo3(signature = (*, seed=0, side="left", target_tilt_deg=45.0, clutter=true, cross_wall=false, noise=None))]
+fn sim_street_scene(
+    py: Python<'_>,
+    seed: u64,
+    side: &str,
+    target_tilt_deg: f64,
+    clutter: bool,
+    cross_wall: bool,
+    noise: Option<f64>,
+) -> PyResult<Scene> {
+    let side = match side {
+        "left" => Side::Left,
+        "right" => Side::Right,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "side must be 'left' or 'right', got {other:?}"
+            )))
+        }
+    };
+    let options = StreetOptions {
+        seed,
+        side,
+        target_tilt_deg,
+        clutter,
+        cross_wall,
+        range_noise: noise,
+    };
+    let inner = run(py, move || street_scene(&options))?;
+    Ok(Scene {
+        kind: "street",
+        inner,
+    })
+}
+
+/// The corridor scene (floor and two parallel walls): translation along it is unobservable.
+#[pyfunction]
+#[pyo3(signature = (*, seed=0))]
+fn sim_corridor_scene(py: Python<'_>, seed: u64) -> PyResult<Scene> {
+    let inner = run(py, move || corridor_scene(seed))?;
+    Ok(Scene {
+        kind: "corridor",
+        inner,
+    })
+}
+
 /// The two-poles scene.
 #[pyfunction]
 #[pyo3(signature = (model=None, *, seed=0, radius=0.1, distance=5.0, distractor=false, noise=None, dropout=0.0, max_tilt_deg=15.0, target_upside_down=false))]
@@ -568,6 +615,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim_scan, m)?)?;
     m.add_function(wrap_pyfunction!(sim_corner_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_poles_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_street_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_corridor_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_paper_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_pole_axis_trial, m)?)?;
     m.add_function(wrap_pyfunction!(write_pcd, m)?)?;

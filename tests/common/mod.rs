@@ -156,3 +156,84 @@ pub fn pose_rpy_deg(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Isometry3<f
         ),
     )
 }
+
+/// `../shared/eval_data/SensorsCalibration` beside the checkout, if present.
+pub fn sensors_calibration_dir() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/eval_data/SensorsCalibration");
+    dir.is_dir().then_some(dir)
+}
+
+/// `None` with a note when the shared data are absent outside CI; a panic in CI (`CI` set), where
+/// they must be present.
+pub fn require_sensors_calibration() -> Option<std::path::PathBuf> {
+    match sensors_calibration_dir() {
+        Some(d) => Some(d),
+        None if std::env::var_os("CI").is_some() => {
+            panic!("../shared/eval_data/SensorsCalibration is missing: CI must run with ../shared")
+        }
+        None => {
+            eprintln!("skipped: ../shared/eval_data/SensorsCalibration not present");
+            None
+        }
+    }
+}
+
+/// The first three columns of a little-endian float32 `.npy` array of shape `(N, C)`, `C >= 3`.
+pub fn load_npy_xyz(path: &std::path::Path) -> Vec<Point3<f64>> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(
+        &bytes[..6],
+        b"\x93NUMPY",
+        "{} is not an npy file",
+        path.display()
+    );
+    let (header_len, start) = if bytes[6] == 1 {
+        (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10)
+    } else {
+        (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        )
+    };
+    let header = std::str::from_utf8(&bytes[start..start + header_len]).unwrap();
+    assert!(header.contains("'<f4'") && header.contains("'fortran_order': False"));
+    let shape = &header[header.find("'shape': (").unwrap() + 10..];
+    let shape = &shape[..shape.find(')').unwrap()];
+    let dims: Vec<usize> = shape
+        .split(',')
+        .filter_map(|s| s.trim().parse().ok())
+        .collect();
+    let (n, c) = (dims[0], dims[1]);
+    let data = &bytes[start + header_len..];
+    let value = |k: usize| f32::from_le_bytes(data[4 * k..4 * k + 4].try_into().unwrap()) as f64;
+    (0..n)
+        .map(|i| Point3::new(value(i * c), value(i * c + 1), value(i * c + 2)))
+        .collect()
+}
+
+/// The 4x4 `matrix_4x4` that follows `keys` (in order) in the reference JSON, as an isometry.
+pub fn reference_extrinsic(dir: &std::path::Path, keys: &[&str]) -> Isometry3<f64> {
+    let text = std::fs::read_to_string(dir.join("reference_extrinsics.json")).unwrap();
+    let mut at = 0;
+    for key in keys.iter().chain(&["matrix_4x4"]) {
+        at += text[at..]
+            .find(&format!("\"{key}\""))
+            .unwrap_or_else(|| panic!("{key} not in the reference JSON"));
+    }
+    let numbers: Vec<f64> = text[at + "\"matrix_4x4\"".len()..]
+        .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == 'e'))
+        .filter(|s| !s.is_empty())
+        .take(16)
+        .map(|s| s.parse().unwrap())
+        .collect();
+    let m = nalgebra::Matrix4::from_row_slice(&numbers);
+    lidarcal::geometry::isometry_from_matrix(&m).unwrap()
+}
+
+/// The three real_world scenes of SensorsCalibration.
+pub const REAL_WORLD_SCENES: [&str; 3] = [
+    "2022-02-15-17-31-37-050",
+    "2022-02-15-17-36-04-449",
+    "2022-02-15-17-45-07-750",
+];

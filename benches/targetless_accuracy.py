@@ -1,0 +1,89 @@
+"""Must-show numbers of the targetless method (issue 8) on the real road data.
+
+Run from the repository root after installing the wheel:
+    python benches/targetless_accuracy.py [path/to/shared/eval_data/SensorsCalibration]
+
+Prints, for every real_world scene, left->top and right->top against the reference (rotation
+error = angle of R_true R^T, translation error = |t_true - t|), the spread of our own results
+across the three scenes, and the four hesai QT units against the P64 (weaker reference).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import lidarcal
+
+DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "eval_data" / "SensorsCalibration"
+
+
+def errors(truth: np.ndarray, est: np.ndarray) -> tuple[float, float]:
+    r = truth[:3, :3] @ est[:3, :3].T
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1))))
+    return angle, float(np.linalg.norm(truth[:3, 3] - est[:3, 3]))
+
+
+def run(reference: np.ndarray, target: np.ndarray) -> tuple[np.ndarray | None, str, float]:
+    t0 = time.perf_counter()
+    try:
+        r = lidarcal.calibrate_targetless(reference, target)
+        note = (
+            f"planes={r.matched_planes} best={r.best_score:.3f} second={r.second_score:.3f} "
+            f"weakest={r.weakest_translation[1]:.3f}"  # type: ignore[index]
+        )
+        return r.transform, note, time.perf_counter() - t0
+    except lidarcal.CalibrationError as e:
+        return None, f"refused: {e}", time.perf_counter() - t0
+
+
+def main() -> None:
+    base = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT
+    refs = json.loads((base / "reference_extrinsics.json").read_text())
+    print("| scene | pair | rot err (deg) | trans err (m) | time (s) | notes |")
+    print("|---|---|---|---|---|---|")
+    ours: dict[str, list[np.ndarray]] = {"left": [], "right": []}
+    for scene in sorted(refs["real_world"]):
+        d = base / "real_world" / scene
+        top = np.load(d / "top.npy")[:, :3]
+        for side in ("left", "right"):
+            truth = np.array(refs["real_world"][scene][f"{side}_to_top"]["matrix_4x4"])
+            est, note, dt = run(top, np.load(d / f"{side}.npy")[:, :3])
+            if est is None:
+                print(f"| {scene} | {side}->top | - | - | {dt:.2f} | {note} |")
+                continue
+            ours[side].append(est)
+            a, t = errors(truth, est)
+            print(f"| {scene} | {side}->top | {a:.3f} | {t:.3f} | {dt:.2f} | {note} |")
+    print()
+    print("Spread of our results across the scenes (max pairwise difference):")
+    for side, poses in ours.items():
+        if len(poses) < 2:
+            print(f"  {side}: fewer than two results")
+            continue
+        diffs = [errors(a, b) for i, a in enumerate(poses) for b in poses[i + 1 :]]
+        print(
+            f"  {side}: {max(d[0] for d in diffs):.3f} deg, {max(d[1] for d in diffs):.3f} m "
+            f"({len(poses)} results)"
+        )
+    print()
+    h = base / "hesai_scene1"
+    p64 = np.load(h / "p64.npy")[:, :3]
+    print("| hesai QT | rot err (deg) | trans err (m) | time (s) | notes |")
+    print("|---|---|---|---|---|")
+    for qt in ("qt_201", "qt_202", "qt_203", "qt_204"):
+        truth = np.array(refs["hesai_scene1"][f"{qt}_to_p64"]["matrix_4x4"])
+        est, note, dt = run(p64, np.load(h / f"{qt}.npy")[:, :3])
+        if est is None:
+            print(f"| {qt} | - | - | {dt:.2f} | {note} |")
+            continue
+        a, t = errors(truth, est)
+        print(f"| {qt} | {a:.3f} | {t:.3f} | {dt:.2f} | {note} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1088 @@
+//! Targetless calibration from the planes of an ordinary scene (road, yard, hall): no target, no
+//! initial guess, any mounting (the side units of a road rig are tilted ~45 degrees).
+//!
+//! # Pipeline
+//! 1. **Downsample.** Each cloud is reduced to voxel centroids ([`TargetlessOptions::voxel_size`]),
+//!    which evens out a spinning LiDAR's density and bounds the work.
+//! 2. **Planes.** Up to [`TargetlessOptions::max_planes`] distinct planes per cloud
+//!    ([`extract_distinct_planes`]: sequential RANSAC in which a plane within 10 degrees and 1 m of
+//!    an accepted one is another slice of it, as an uneven road is, then the joint reassignment).
+//!    Each keeps its inlier count, centroid and extent. The inlier threshold is `3 sigma` of each
+//!    cloud's noise ([`estimate_threshold`]) unless given.
+//! 3. **Hypotheses.** Two non-parallel planes fix the rotation: for every pair of reference planes
+//!    at least [`MIN_PAIR_ANGLE`] from parallel and every ordered pair of target planes whose
+//!    normals make the same angle (within [`TargetlessOptions::normal_tolerance`]), Kabsch on the
+//!    two unit normals and their cross product gives `R` (normals are oriented toward their
+//!    sensor, so the handedness is kept and mirror matches never arise). The pair gives two
+//!    components of `t` (`n_ref . t = d_tgt - d_ref` per matched plane). A third target plane
+//!    out of the pair's span, matched to a reference plane of the same normal, gives the third: a
+//!    **triplet** hypothesis, solved by least squares on the three planes. Without one (a street
+//!    of ground and facades) the third component is left at the minimum-norm value (sensors of
+//!    one rig are close together) and is settled by ICP in step 5.
+//! 4. **Verification.** Hypotheses are deduplicated (1 degree, 10 cm) and ranked by the planes
+//!    they bring into agreement (a target plane agrees with a reference plane when their normals
+//!    are within the tolerance and, where the hypothesis fixes it, their offsets within
+//!    [`TargetlessOptions::offset_tolerance`]), weighted by inliers. The best
+//!    [`TargetlessOptions::max_verified`] are each polished by a short ICP and scored by the
+//!    fraction of target points that land within [`VERIFY_DISTANCE`] of a reference point. The
+//!    highest score wins; the best score of a hypothesis ending at a different pose (more than 2
+//!    degrees or 30 cm away) is reported as the second best.
+//! 5. **Refinement.** Every target plane that agrees with a reference plane at the winning pose is
+//!    matched; Levenberg–Marquardt minimises the symmetric point-to-plane cost over all matched
+//!    planes (exact per-plane sufficient statistics, [`PlaneMomentsProblem`]). Then, unless
+//!    disabled, point-to-plane ICP on the whole (downsampled) clouds ([`point_to_plane_icp`]),
+//!    with a shrinking correspondence distance and a Cauchy loss, so the part of each scan the
+//!    other sensor does not see drops out.
+//! 6. **Observability.** The calibration is refused when the data do not constrain all six
+//!    degrees of freedom: the weakest direction of the translation (and rotation) information of
+//!    the final problem (`sum w n n^T` over the ICP correspondences, or over the matched planes
+//!    without ICP) must hold at least [`TargetlessOptions::min_information_share`] of it. A
+//!    corridor (floor and parallel walls) has none along its axis and is refused with that
+//!    direction named; so is a pose that only planes constrain when their normals span fewer than
+//!    three directions.
+//!
+//! # Limits
+//! * Both sensors must see at least two common non-parallel planes (the ground and one facade
+//!   suffice); the verification needs a few hundred common points.
+//! * On a straight street of ground and facades only, the translation along the street comes
+//!   from the other structures ICP sees in both clouds (trunks, poles, kerbs, parked cars): its
+//!   share of the information is reported (`weakest_translation`) and the calibration is refused
+//!   when it is too small.
+//!
+//! # Example
+//! ```no_run
+//! use lidarcal::calib::targetless::{calibrate_targetless, TargetlessOptions};
+//! use lidarcal::sim::scenes::{street_scene, StreetOptions};
+//!
+//! let scene = street_scene(&StreetOptions::default())?;
+//! let result = calibrate_targetless(
+//!     &scene.reference.positions(),
+//!     &scene.target.positions(),
+//!     &TargetlessOptions::default(),
+//! )?;
+//! let error = result.reference_from_target.inverse() * scene.reference_from_target;
+//! assert!(error.rotation.angle() < 0.005 && error.translation.vector.norm() < 0.05);
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
+
+use super::planes::estimate_threshold;
+use super::{Stopwatch, Timings};
+use crate::error::{ensure_finite, Error, Result};
+use crate::fit::Moments;
+use crate::geometry::{rotation_angle, Plane};
+use crate::icp::{
+    point_to_plane_icp, voxel_downsample, weakest_direction, IcpOptions, IcpResult, SurfaceCloud,
+};
+use crate::kabsch::kabsch;
+use crate::lm::{solve, LmOptions, LmReport};
+use crate::ransac::plane::ransac_plane;
+use crate::ransac::RansacOptions;
+use crate::residuals::{Frame, PlaneMomentGroup, PlaneMomentsProblem};
+
+/// Two planes of a hypothesis pair must be at least this far from parallel (radians, 30 degrees).
+pub const MIN_PAIR_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
+/// A third plane completes a triplet when its normal leaves the pair's span by at least this
+/// angle (radians, 20 degrees).
+pub const MIN_THIRD_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
+/// Most hypotheses enumerated (pairs and triplets, before deduplication).
+pub const MAX_HYPOTHESES: usize = 50_000;
+/// Hypotheses within this rotation (radians, 1 degree) ...
+pub const DUPLICATE_ANGLE: f64 = 1.0 * std::f64::consts::PI / 180.0;
+/// ... and translation (metres) of each other are one.
+pub const DUPLICATE_DISTANCE: f64 = 0.1;
+/// Two verified hypotheses further apart than this rotation (radians, 2 degrees) ...
+pub const DISTINCT_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// ... or this translation (metres) are different answers (for the second-best score).
+pub const DISTINCT_DISTANCE: f64 = 0.3;
+/// A verified target point agrees when a reference point lies within this distance (metres).
+pub const VERIFY_DISTANCE: f64 = 0.25;
+/// Target points (at most, by a fixed stride) scored in the verification.
+pub const VERIFY_SAMPLES: usize = 800;
+/// Bounds of the inlier threshold taken from the noise estimate (metres). Road scenes are not
+/// flat (camber, kerbs, pavements): when the estimate fails or exceeds the upper bound, the upper
+/// bound is used.
+pub const ESTIMATED_THRESHOLD_RANGE: (f64, f64) = (0.03, 0.1);
+/// Side of the cubic cells whose points form the local patches of the plane segmentation (m).
+pub const PATCH_SIZE: f64 = 1.0;
+/// Fewest (downsampled) points of a patch.
+pub const PATCH_MIN_POINTS: usize = 5;
+/// A patch is flat when the RMS distance of its points to their plane is under this fraction of
+/// the inlier threshold ...
+pub const PATCH_MAX_THICKNESS: f64 = 0.8;
+/// ... and its points spread at least this far (metres, RMS) along its second axis (not a line).
+pub const PATCH_MIN_SPREAD: f64 = 0.1;
+/// A neighbouring patch joins a growing plane when its normal is within this angle (radians,
+/// 10 degrees) of the plane's ...
+pub const GROW_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// ... and its centroid within this many inlier thresholds of the plane.
+pub const GROW_OFFSET: f64 = 2.0;
+/// A segmented plane within this angle (radians, 5 degrees) ...
+pub const MERGE_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+/// ... and offset (metres) of a larger one is another part of the same surface (an uneven road)
+/// and is not kept as a plane of its own.
+pub const MERGE_OFFSET: f64 = 0.3;
+/// RANSAC hypotheses per sequentially extracted plane.
+pub const PLANE_RANSAC_ITERATIONS: usize = 1000;
+/// Smallest extent of a plane along its second in-plane axis (metres).
+pub const MIN_PLANE_WIDTH: f64 = 1.0;
+
+/// Options of [`calibrate_targetless`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetlessOptions {
+    /// Plane inlier distance (metres), or `None` to estimate it per cloud (3 sigma, within
+    /// [`ESTIMATED_THRESHOLD_RANGE`]).
+    pub distance_threshold: Option<f64>,
+    /// Voxel side of the downsampling (metres).
+    pub voxel_size: f64,
+    /// Most planes extracted per cloud.
+    pub max_planes: usize,
+    /// Fewest inliers (voxels) of a plane.
+    pub min_inliers: usize,
+    /// Angles between normals that agree (radians).
+    pub normal_tolerance: f64,
+    /// Offsets of planes that agree (metres).
+    pub offset_tolerance: f64,
+    /// Hypotheses polished by a short ICP and scored by point agreement.
+    pub max_verified: usize,
+    /// Hypotheses translating the target by more than this (metres) are dropped: the sensors of
+    /// one rig are a few metres apart at most. `f64::INFINITY` keeps all.
+    pub max_translation: f64,
+    /// Run the final ICP on the whole clouds.
+    pub icp: bool,
+    /// Options of the final ICP.
+    pub icp_options: IcpOptions,
+    /// Smallest share of the translation (and rotation) information in its weakest direction;
+    /// below it the calibration is refused as unobservable.
+    pub min_information_share: f64,
+    /// Seed of the RANSAC sampler.
+    pub seed: u64,
+}
+
+impl Default for TargetlessOptions {
+    fn default() -> Self {
+        TargetlessOptions {
+            distance_threshold: None,
+            voxel_size: 0.1,
+            max_planes: 10,
+            min_inliers: 30,
+            normal_tolerance: 5f64.to_radians(),
+            offset_tolerance: 0.3,
+            max_verified: 24,
+            max_translation: 5.0,
+            icp: true,
+            icp_options: IcpOptions::default(),
+            min_information_share: 0.01,
+            seed: 0,
+        }
+    }
+}
+
+impl TargetlessOptions {
+    fn validate(&self) -> Result<()> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::InvalidInput(format!(
+                    "{name} must be finite and positive, got {v}"
+                )))
+            }
+        };
+        if let Some(t) = self.distance_threshold {
+            positive("distance_threshold", t)?;
+        }
+        positive("voxel_size", self.voxel_size)?;
+        positive("normal_tolerance", self.normal_tolerance)?;
+        positive("offset_tolerance", self.offset_tolerance)?;
+        if self.max_translation.is_nan() || self.max_translation <= 0.0 {
+            return Err(Error::InvalidInput(format!(
+                "max_translation must be positive (or inf), got {}",
+                self.max_translation
+            )));
+        }
+        if !(0.0..1.0 / 3.0).contains(&self.min_information_share) {
+            return Err(Error::InvalidInput(format!(
+                "min_information_share must be in [0, 1/3), got {}",
+                self.min_information_share
+            )));
+        }
+        if self.max_planes < 2 || self.max_verified == 0 || self.min_inliers < 3 {
+            return Err(Error::InvalidInput(format!(
+                "need max_planes >= 2, max_verified >= 1 and min_inliers >= 3; got {}, {}, {}",
+                self.max_planes, self.max_verified, self.min_inliers
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// A plane of one cloud with what the matching uses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneFeature {
+    /// The plane, normal toward the sensor.
+    pub plane: Plane,
+    /// Indices of its inliers in the downsampled cloud.
+    pub voxels: Vec<usize>,
+    /// Centroid of the inliers.
+    pub centroid: Point3<f64>,
+    /// Extent of the inliers along their two principal in-plane axes (metres, larger first:
+    /// `sqrt(12 l)` of the scatter eigenvalues, the side of a uniform patch).
+    pub extent: [f64; 2],
+}
+
+/// Result of [`calibrate_targetless`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetlessCalibration {
+    /// The calibrated `reference_from_target`.
+    pub reference_from_target: Isometry3<f64>,
+    /// The winning hypothesis (planes only, before any refinement).
+    pub initial_reference_from_target: Isometry3<f64>,
+    /// The matched planes in the reference frame (row `i` matches `planes_target[i]`).
+    pub planes_reference: Vec<Plane>,
+    /// The matched planes in the target frame.
+    pub planes_target: Vec<Plane>,
+    /// Indices into the reference input of each matched plane's points.
+    pub inliers_reference: Vec<Vec<usize>>,
+    /// Indices into the target input of each matched plane's points.
+    pub inliers_target: Vec<Vec<usize>>,
+    /// RMS point-to-plane residual of each matched plane at the result (both clouds).
+    pub rmse: Vec<f64>,
+    /// Planes extracted from the reference and the target cloud.
+    pub features: [Vec<PlaneFeature>; 2],
+    /// Hypotheses enumerated and, after deduplication, distinct ones.
+    pub hypotheses: [usize; 2],
+    /// Hypotheses verified by ICP.
+    pub verified: usize,
+    /// Whether the winning hypothesis came from a plane triplet (all three translation
+    /// components from planes) rather than a pair.
+    pub triplet: bool,
+    /// Verification score (fraction of target points agreeing) of the best hypothesis.
+    pub best_score: f64,
+    /// Best verification score of a hypothesis ending at a different pose (0 when none).
+    pub second_score: f64,
+    /// Inlier thresholds used for the reference and the target cloud (metres).
+    pub distance_thresholds: [f64; 2],
+    /// Levenberg–Marquardt report of the plane refinement.
+    pub report: Option<LmReport>,
+    /// The final ICP (`None` when disabled).
+    pub icp: Option<IcpResult>,
+    /// Weakest translation direction (reference frame) of the final problem and its share of
+    /// the information.
+    pub weakest_translation: (Vector3<f64>, f64),
+    /// Weakest rotation axis of the final problem and its share.
+    pub weakest_rotation: (Vector3<f64>, f64),
+    /// Share of the weakest translation direction spanned by the matched planes' normals alone.
+    pub plane_translation_share: f64,
+    /// Covariance of the left-perturbation tangent `[rho; phi]` of the result (from ICP when it
+    /// ran, else from the plane refinement).
+    pub covariance: Option<Matrix6<f64>>,
+    /// Stage timings.
+    pub timings: Timings,
+}
+
+fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
+    if points.len() < 100 {
+        return Err(Error::InvalidInput(format!(
+            "the {which} cloud has {} points; the targetless method needs at least 100",
+            points.len()
+        )));
+    }
+    ensure_finite(which, points.iter().flat_map(|p| p.coords.iter()))
+}
+
+fn isometry(rotation: &nalgebra::Rotation3<f64>, t: Vector3<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_rotation_matrix(rotation),
+    )
+}
+
+/// A downsampled cloud with its planes.
+struct Prepared {
+    points: Vec<Point3<f64>>,
+    owner: Vec<usize>,
+    threshold: f64,
+    features: Vec<PlaneFeature>,
+}
+
+fn prepare(points: &[Point3<f64>], options: &TargetlessOptions) -> Result<Prepared> {
+    let (ds, owner) = voxel_downsample(points, options.voxel_size)?;
+    let threshold = match options.distance_threshold {
+        Some(t) => t,
+        None => match estimate_threshold(&ds, options.seed) {
+            Ok(t) => t.clamp(ESTIMATED_THRESHOLD_RANGE.0, ESTIMATED_THRESHOLD_RANGE.1),
+            Err(Error::Calibration(_)) => ESTIMATED_THRESHOLD_RANGE.1,
+            Err(e) => return Err(e),
+        },
+    };
+    let mut features = segment_planes(&ds, threshold, options.max_planes, options.min_inliers)?;
+    features.extend(sequential_planes(
+        &ds,
+        threshold,
+        2 * options.max_planes,
+        options.min_inliers,
+        options.seed,
+    )?);
+    let features = distinct(features, 2 * options.max_planes);
+    Ok(Prepared {
+        points: ds,
+        owner,
+        threshold,
+        features,
+    })
+}
+
+/// A flat cell of the segmentation.
+struct Patch {
+    moments: Moments,
+    normal: Vector3<f64>,
+    centroid: Point3<f64>,
+    indices: Vec<usize>,
+}
+
+/// Up to `max_planes` distinct planar surfaces of `points` by region growing over flat local
+/// patches (see [`PATCH_SIZE`] and the growing constants), largest first. Each plane is refitted
+/// on its patches' points; its inliers are those within `threshold`.
+pub fn segment_planes(
+    points: &[Point3<f64>],
+    threshold: f64,
+    max_planes: usize,
+    min_inliers: usize,
+) -> Result<Vec<PlaneFeature>> {
+    let mut cells: std::collections::HashMap<[i64; 3], Vec<usize>> =
+        std::collections::HashMap::new();
+    for (i, p) in points.iter().enumerate() {
+        let key = [
+            (p.x / PATCH_SIZE).floor() as i64,
+            (p.y / PATCH_SIZE).floor() as i64,
+            (p.z / PATCH_SIZE).floor() as i64,
+        ];
+        cells.entry(key).or_default().push(i);
+    }
+    let mut keys: Vec<[i64; 3]> = cells.keys().copied().collect();
+    keys.sort_unstable();
+    let mut patches: Vec<Patch> = Vec::new();
+    let mut patch_of: std::collections::HashMap<[i64; 3], usize> = std::collections::HashMap::new();
+    for key in &keys {
+        let Some(indices) = cells.remove(key) else {
+            continue;
+        };
+        if indices.len() < PATCH_MIN_POINTS {
+            continue;
+        }
+        let moments = Moments::from_points(indices.iter().filter_map(|&i| points.get(i)));
+        let (values, vectors) = moments.principal_axes();
+        let n = moments.weight();
+        let thickness = (values[0] / n).sqrt();
+        let spread = (values[1] / n).sqrt();
+        if thickness > PATCH_MAX_THICKNESS * threshold || spread < PATCH_MIN_SPREAD {
+            continue;
+        }
+        let centroid = moments.mean();
+        let mut normal = vectors[0];
+        if normal.dot(&centroid.coords) > 0.0 {
+            normal = -normal; // toward the sensor
+        }
+        patch_of.insert(*key, patches.len());
+        patches.push(Patch {
+            moments,
+            normal,
+            centroid,
+            indices,
+        });
+    }
+    let patch_keys: Vec<[i64; 3]> = {
+        let mut v = vec![[0i64; 3]; patches.len()];
+        for (k, &i) in &patch_of {
+            if let Some(slot) = v.get_mut(i) {
+                *slot = *k;
+            }
+        }
+        v
+    };
+    let mut order: Vec<usize> = (0..patches.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(patches[i].indices.len()));
+    let mut assigned = vec![false; patches.len()];
+    let mut regions: Vec<Vec<usize>> = Vec::new();
+    for &seed in &order {
+        if assigned[seed] {
+            continue;
+        }
+        assigned[seed] = true;
+        let mut region = vec![seed];
+        let mut moments = patches[seed].moments;
+        let mut plane = Plane::from_point_normal(&patches[seed].centroid, &patches[seed].normal)?;
+        let mut queue = std::collections::VecDeque::from([seed]);
+        while let Some(current) = queue.pop_front() {
+            if let Ok(fit) = moments.plane() {
+                plane = fit.plane;
+            }
+            let [x, y, z] = patch_keys[current];
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let Some(&j) = patch_of.get(&[x + dx, y + dy, z + dz]) else {
+                            continue;
+                        };
+                        if assigned[j] {
+                            continue;
+                        }
+                        let p = &patches[j];
+                        let aligned = p.normal.dot(&plane.normal).abs() > GROW_ANGLE.cos();
+                        let near =
+                            plane.signed_distance(&p.centroid).abs() < GROW_OFFSET * threshold;
+                        if aligned && near {
+                            assigned[j] = true;
+                            region.push(j);
+                            merge_moments(&mut moments, &p.moments);
+                            queue.push_back(j);
+                        }
+                    }
+                }
+            }
+        }
+        regions.push(region);
+    }
+    let mut features: Vec<PlaneFeature> = Vec::new();
+    for region in regions {
+        let candidates: Vec<usize> = region
+            .iter()
+            .flat_map(|&r| patches[r].indices.iter().copied())
+            .collect();
+        if candidates.len() < min_inliers {
+            continue;
+        }
+        let Ok(fit) =
+            Moments::from_points(candidates.iter().filter_map(|&i| points.get(i))).plane()
+        else {
+            continue;
+        };
+        let plane = fit.plane.oriented_toward(&Point3::origin());
+        let mut voxels: Vec<usize> = candidates
+            .into_iter()
+            .filter(|&i| {
+                points
+                    .get(i)
+                    .is_some_and(|p| plane.signed_distance(p).abs() < threshold)
+            })
+            .collect();
+        voxels.sort_unstable();
+        if voxels.len() < min_inliers {
+            continue;
+        }
+        features.extend(feature(points, plane, voxels));
+    }
+    Ok(distinct(features, max_planes))
+}
+
+/// The largest `max_planes` of `features` that are not within [`MERGE_ANGLE`] and
+/// [`MERGE_OFFSET`] of a larger one.
+fn distinct(mut features: Vec<PlaneFeature>, max_planes: usize) -> Vec<PlaneFeature> {
+    features.sort_by_key(|f| std::cmp::Reverse(f.voxels.len()));
+    let mut kept: Vec<PlaneFeature> = Vec::new();
+    for f in features {
+        if kept.len() >= max_planes {
+            break;
+        }
+        let duplicate = kept.iter().any(|k| {
+            k.plane.normal.dot(&f.plane.normal) > MERGE_ANGLE.cos()
+                && (k.plane.offset - f.plane.offset).abs() < MERGE_OFFSET
+        });
+        if !duplicate {
+            kept.push(f);
+        }
+    }
+    kept
+}
+
+/// A plane feature from inlier indices, if it is at least [`MIN_PLANE_WIDTH`] wide.
+fn feature(points: &[Point3<f64>], plane: Plane, voxels: Vec<usize>) -> Option<PlaneFeature> {
+    let m = Moments::from_points(voxels.iter().filter_map(|&i| points.get(i)));
+    let (values, _) = m.principal_axes();
+    let extent = [
+        (12.0 * values[2] / m.weight().max(1.0)).sqrt(),
+        (12.0 * values[1] / m.weight().max(1.0)).sqrt(),
+    ];
+    (extent[1] >= MIN_PLANE_WIDTH).then(|| PlaneFeature {
+        plane,
+        voxels,
+        centroid: m.mean(),
+        extent,
+    })
+}
+
+/// Up to `count` planes by sequential RANSAC (infinite planes, each run on the points the
+/// previous ones left). It finds what the patches miss in sparse clouds: a facade crossed by a
+/// few scan lines of a tilted unit.
+fn sequential_planes(
+    points: &[Point3<f64>],
+    threshold: f64,
+    count: usize,
+    min_inliers: usize,
+    seed: u64,
+) -> Result<Vec<PlaneFeature>> {
+    let mut taken = vec![false; points.len()];
+    let mut out = Vec::new();
+    for run in 0..count {
+        let remaining: Vec<usize> = (0..points.len()).filter(|&i| !taken[i]).collect();
+        if remaining.len() < min_inliers.max(3) {
+            break;
+        }
+        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
+        let mut options = RansacOptions::new(threshold);
+        options.seed = seed.wrapping_add((run as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        options.max_iterations = PLANE_RANSAC_ITERATIONS;
+        let found = match ransac_plane(&subset, &options) {
+            Ok(f) => f,
+            Err(Error::Degenerate(_)) => break,
+            Err(e) => return Err(e),
+        };
+        if found.inliers.len() < min_inliers {
+            break;
+        }
+        let voxels: Vec<usize> = found.inliers.iter().map(|&i| remaining[i]).collect();
+        for &i in &voxels {
+            taken[i] = true;
+        }
+        out.extend(feature(points, found.model, voxels));
+    }
+    Ok(out)
+}
+
+/// Adds the moments `b` into `a` (both shifted to their own origins).
+fn merge_moments(a: &mut Moments, b: &Moments) {
+    // Moments only exposes point accumulation; rebuild `b`'s contribution from its mean and
+    // scatter: adding the scatter's principal components as weighted point pairs is exact.
+    let n = b.weight();
+    if n <= 0.0 {
+        return;
+    }
+    let mean = b.mean();
+    let (values, vectors) = b.principal_axes();
+    // Two points at mean +- s v with weight n/2 each per axis reproduce the scatter l v v^T
+    // when s = sqrt(l / n); the mean is kept and the total weight is 3n, so scale by 1/3.
+    for (l, v) in values.iter().zip(vectors.iter()) {
+        let s = (l / n).sqrt() * 3f64.sqrt();
+        a.add_weighted(&(mean + v * s), n / 6.0);
+        a.add_weighted(&(mean - v * s), n / 6.0);
+    }
+}
+
+/// The planes [`calibrate_targetless`] extracts from one cloud (steps 1 and 2 of the module docs)
+/// and the inlier threshold used; feature voxel indices refer to the downsampled cloud.
+pub fn plane_features(
+    points: &[Point3<f64>],
+    options: &TargetlessOptions,
+) -> Result<(Vec<PlaneFeature>, f64)> {
+    options.validate()?;
+    check_cloud(points, "input")?;
+    let p = prepare(points, options)?;
+    Ok((p.features, p.threshold))
+}
+
+/// A candidate transform from plane correspondences.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    pose: Isometry3<f64>,
+    /// Unit direction of translation no plane of the hypothesis fixes (pairs only).
+    free: Option<Vector3<f64>>,
+    support: f64,
+}
+
+fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.dot(b).clamp(-1.0, 1.0).acos()
+}
+
+/// Least squares `t` from rows `n_i . t = b_i`: the minimum-norm solution when the normals span
+/// two directions, with the free direction.
+fn solve_translation(
+    normals: &[Vector3<f64>],
+    rhs: &[f64],
+) -> Option<(Vector3<f64>, Option<Vector3<f64>>)> {
+    let mut ata = Matrix3::zeros();
+    let mut atb = Vector3::zeros();
+    for (n, b) in normals.iter().zip(rhs) {
+        ata += n * n.transpose();
+        atb += n * *b;
+    }
+    let eig = nalgebra::SymmetricEigen::new(ata);
+    let largest = eig.eigenvalues.amax();
+    if largest <= 0.0 {
+        return None;
+    }
+    let mut t = Vector3::zeros();
+    let mut free = None;
+    for k in 0..3 {
+        let v = eig.eigenvectors.column(k).into_owned();
+        let l = eig.eigenvalues[k];
+        if l > 0.04 * largest {
+            t += v * (v.dot(&atb) / l);
+        } else if free.is_none() {
+            free = Some(v);
+        } else {
+            return None; // one direction only
+        }
+    }
+    Some((t, free))
+}
+
+fn same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>, angle: f64, distance: f64) -> bool {
+    let d = a.inverse() * b;
+    d.rotation.angle() < angle && (a.translation.vector - b.translation.vector).norm() < distance
+}
+
+/// Matches every target plane to the best agreeing reference plane under `pose`:
+/// `(reference index, target index)` pairs. Offsets are checked except along `free`.
+fn agreeing(
+    reference: &[PlaneFeature],
+    target: &[PlaneFeature],
+    pose: &Isometry3<f64>,
+    free: Option<&Vector3<f64>>,
+    normal_tolerance: f64,
+    offset_tolerance: f64,
+) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for (j, t) in target.iter().enumerate() {
+        let mapped = t.plane.transformed(pose);
+        let n = mapped.normal.into_inner();
+        let offset_known = free.is_none_or(|v| n.dot(v).abs() < 0.2);
+        let mut best: Option<(usize, f64)> = None;
+        for (i, r) in reference.iter().enumerate() {
+            let angle = angle_between(&n, &r.plane.normal);
+            if angle > normal_tolerance {
+                continue;
+            }
+            let gap = (mapped.offset - r.plane.offset).abs();
+            if offset_known && gap > offset_tolerance {
+                continue;
+            }
+            let cost = angle / normal_tolerance + if offset_known { gap } else { 1.0 };
+            if best.is_none_or(|(_, c)| cost < c) {
+                best = Some((i, cost));
+            }
+        }
+        if let Some((i, _)) = best {
+            out.push((i, j));
+        }
+    }
+    out
+}
+
+fn support(reference: &[PlaneFeature], target: &[PlaneFeature], matches: &[(usize, usize)]) -> f64 {
+    matches
+        .iter()
+        .filter_map(|&(i, j)| Some((reference.get(i)?.voxels.len(), target.get(j)?.voxels.len())))
+        .map(|(a, b)| (a.min(b) as f64).sqrt())
+        .sum()
+}
+
+/// Every pair and triplet hypothesis (step 3 of the module docs); `(enumerated, distinct)`.
+fn hypotheses(
+    reference: &[PlaneFeature],
+    target: &[PlaneFeature],
+    options: &TargetlessOptions,
+) -> (usize, Vec<Candidate>) {
+    let tol = options.normal_tolerance;
+    let n_ref: Vec<Vector3<f64>> = reference
+        .iter()
+        .map(|f| f.plane.normal.into_inner())
+        .collect();
+    let n_tgt: Vec<Vector3<f64>> = target.iter().map(|f| f.plane.normal.into_inner()).collect();
+    let mut raw: Vec<Candidate> = Vec::new();
+    let mut enumerated = 0usize;
+    'outer: for i in 0..n_ref.len() {
+        for j in (i + 1)..n_ref.len() {
+            let angle_ref = angle_between(&n_ref[i], &n_ref[j]);
+            if !(MIN_PAIR_ANGLE..=std::f64::consts::PI - MIN_PAIR_ANGLE).contains(&angle_ref) {
+                continue;
+            }
+            for k in 0..n_tgt.len() {
+                for l in 0..n_tgt.len() {
+                    if k == l || (angle_between(&n_tgt[k], &n_tgt[l]) - angle_ref).abs() > tol {
+                        continue;
+                    }
+                    let a = [n_ref[i], n_ref[j], n_ref[i].cross(&n_ref[j]).normalize()];
+                    let b = [n_tgt[k], n_tgt[l], n_tgt[k].cross(&n_tgt[l]).normalize()];
+                    let Ok(solution) = kabsch(&a, &b, None) else {
+                        continue;
+                    };
+                    let r = solution.rotation;
+                    let d = |f: &PlaneFeature| f.plane.offset;
+                    let mut rows = vec![n_ref[i], n_ref[j]];
+                    let mut rhs = vec![
+                        d(&target[k]) - d(&reference[i]),
+                        d(&target[l]) - d(&reference[j]),
+                    ];
+                    let span = a[2];
+                    let mut thirds = 0;
+                    for m in 0..n_tgt.len() {
+                        if m == k || m == l {
+                            continue;
+                        }
+                        let mapped = r * n_tgt[m];
+                        if mapped.dot(&span).abs() < MIN_THIRD_ANGLE.sin() {
+                            continue;
+                        }
+                        for (p, np) in n_ref.iter().enumerate() {
+                            if angle_between(&mapped, np) > tol {
+                                continue;
+                            }
+                            rows.push(*np);
+                            rhs.push(d(&target[m]) - d(&reference[p]));
+                            if let Some((t, None)) = solve_translation(&rows, &rhs) {
+                                raw.push(Candidate {
+                                    pose: isometry(&r, t),
+                                    free: None,
+                                    support: 0.0,
+                                });
+                                thirds += 1;
+                            }
+                            rows.pop();
+                            rhs.pop();
+                            enumerated += 1;
+                        }
+                    }
+                    if thirds == 0 {
+                        if let Some((t, free)) = solve_translation(&rows, &rhs) {
+                            raw.push(Candidate {
+                                pose: isometry(&r, t),
+                                free,
+                                support: 0.0,
+                            });
+                        }
+                        enumerated += 1;
+                    }
+                    if enumerated >= MAX_HYPOTHESES {
+                        break 'outer;
+                    }
+                }
+            }
+        }
+    }
+    // Score, then deduplicate keeping the best supported of each cluster.
+    raw.retain(|c| c.pose.translation.vector.norm() <= options.max_translation);
+    for c in &mut raw {
+        let matches = agreeing(
+            reference,
+            target,
+            &c.pose,
+            c.free.as_ref(),
+            tol,
+            options.offset_tolerance,
+        );
+        c.support = support(reference, target, &matches);
+    }
+    raw.sort_by(|a, b| {
+        b.support
+            .total_cmp(&a.support)
+            .then_with(|| a.free.is_some().cmp(&b.free.is_some()))
+    });
+    let mut distinct: Vec<Candidate> = Vec::new();
+    for c in raw {
+        if !distinct
+            .iter()
+            .any(|d| same_pose(&d.pose, &c.pose, DUPLICATE_ANGLE, DUPLICATE_DISTANCE))
+        {
+            distinct.push(c);
+        }
+    }
+    (enumerated, distinct)
+}
+
+/// Options of the short ICP that polishes each verified hypothesis.
+fn verify_icp_options() -> IcpOptions {
+    IcpOptions {
+        max_distance: 1.0,
+        min_distance: 0.3,
+        shrink: 0.7,
+        max_iterations: 6,
+        samples: 400,
+        step_tolerance: 1e-4,
+    }
+}
+
+fn mapped(points: &[Point3<f64>], pose: &Isometry3<f64>) -> Vec<Point3<f64>> {
+    points.iter().map(|p| pose * p).collect()
+}
+
+/// Calibrates `reference_from_target` from the planes both sensors see (see the module docs).
+///
+/// Errors: [`Error::InvalidInput`] for malformed input or options; [`Error::Calibration`] when
+/// fewer than two non-parallel planes are found or matched, no hypothesis verifies, or the data
+/// do not constrain all six degrees of freedom (the message names the weak direction).
+pub fn calibrate_targetless(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    options: &TargetlessOptions,
+) -> Result<TargetlessCalibration> {
+    options.validate()?;
+    check_cloud(reference, "reference")?;
+    check_cloud(target, "target")?;
+    let mut clock = Stopwatch::start();
+
+    #[cfg(feature = "parallel")]
+    let (ref_result, tgt_result) =
+        rayon::join(|| prepare(reference, options), || prepare(target, options));
+    #[cfg(not(feature = "parallel"))]
+    let (ref_result, tgt_result) = (prepare(reference, options), prepare(target, options));
+    let (reference_ds, target_ds) = (ref_result?, tgt_result?);
+    clock.lap("planes");
+    for (prepared, which) in [(&reference_ds, "reference"), (&target_ds, "target")] {
+        if prepared.features.len() < 2 {
+            return Err(Error::Calibration(format!(
+                "the {which} cloud shows {} plane(s) with at least {} inliers; the targetless \
+                 method needs two non-parallel planes seen by both sensors",
+                prepared.features.len(),
+                options.min_inliers
+            )));
+        }
+    }
+
+    let (enumerated, candidates) = hypotheses(&reference_ds.features, &target_ds.features, options);
+    if candidates.is_empty() {
+        return Err(Error::Calibration(format!(
+            "no pair of non-parallel planes matches between the clouds ({} reference and {} \
+             target planes; normals must agree within {:.1} deg)",
+            reference_ds.features.len(),
+            target_ds.features.len(),
+            options.normal_tolerance.to_degrees()
+        )));
+    }
+    clock.lap("hypotheses");
+
+    let surface = SurfaceCloud::new(reference_ds.points.clone())?;
+    clock.lap("normals");
+
+    // Verification: short ICP from each of the best supported hypotheses, then point agreement.
+    let stride = target_ds.points.len().div_ceil(VERIFY_SAMPLES).max(1);
+    let verify_points: Vec<Point3<f64>> =
+        target_ds.points.iter().step_by(stride).copied().collect();
+    let short = verify_icp_options();
+    let verify_one = |c: &Candidate| -> (Isometry3<f64>, f64) {
+        match point_to_plane_icp(&surface, &target_ds.points, &c.pose, &short) {
+            Ok(r) => (
+                r.pose,
+                surface.overlap(&mapped(&verify_points, &r.pose), VERIFY_DISTANCE),
+            ),
+            Err(_) => (c.pose, 0.0),
+        }
+    };
+    let chosen: Vec<Candidate> = candidates
+        .iter()
+        .take(options.max_verified)
+        .copied()
+        .collect();
+    #[cfg(feature = "parallel")]
+    let verified: Vec<(Isometry3<f64>, f64)> = {
+        use rayon::prelude::*;
+        chosen.par_iter().map(verify_one).collect()
+    };
+    #[cfg(not(feature = "parallel"))]
+    let verified: Vec<(Isometry3<f64>, f64)> = chosen.iter().map(verify_one).collect();
+    let mut best = 0;
+    for (k, v) in verified.iter().enumerate() {
+        if v.1 > verified[best].1 {
+            best = k;
+        }
+    }
+    let (polished, best_score) = verified[best];
+    if best_score <= 0.0 {
+        return Err(Error::Calibration(
+            "no plane hypothesis brings the clouds into agreement (ICP found no overlap)".into(),
+        ));
+    }
+    let second_score = verified
+        .iter()
+        .filter(|(pose, _)| !same_pose(pose, &polished, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+        .map(|v| v.1)
+        .fold(0.0, f64::max);
+    let winner = chosen[best];
+    clock.lap("verify");
+
+    // Plane refinement on every matched plane.
+    let (ref_f, tgt_f) = (&reference_ds.features, &target_ds.features);
+    let threshold = reference_ds.threshold.max(target_ds.threshold);
+    let matches = agreeing(
+        ref_f,
+        tgt_f,
+        &polished,
+        None,
+        options.normal_tolerance,
+        (2.0 * threshold).max(0.1),
+    );
+    let mut groups = Vec::with_capacity(2 * matches.len());
+    let voxels = |ds: &[Point3<f64>], f: &PlaneFeature| {
+        Moments::from_points(f.voxels.iter().filter_map(|&i| ds.get(i)))
+    };
+    for &(i, j) in &matches {
+        groups.push(PlaneMomentGroup {
+            plane: ref_f[i].plane,
+            moments: voxels(&target_ds.points, &tgt_f[j]),
+            frame: Frame::Target,
+        });
+        groups.push(PlaneMomentGroup {
+            plane: tgt_f[j].plane,
+            moments: voxels(&reference_ds.points, &ref_f[i]),
+            frame: Frame::Reference,
+        });
+    }
+    let lm = LmOptions {
+        cost_tolerance: super::planes::CALIBRATION_COST_TOLERANCE,
+        ..LmOptions::default()
+    };
+    let (plane_pose, report, problem) = if groups.is_empty() {
+        (polished, None, None)
+    } else {
+        let problem = PlaneMomentsProblem::new(groups)?;
+        let s = solve(&problem, &polished, &lm)?;
+        // Planes matched wrongly (parallel planes at a similar offset) can pull the pose away
+        // from what the points agree on; then the verified pose is kept.
+        if same_pose(&s.pose, &polished, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
+            (s.pose, Some(s.report), Some(problem))
+        } else {
+            (polished, Some(s.report), Some(problem))
+        }
+    };
+    clock.lap("refine");
+
+    let icp = if options.icp {
+        Some(point_to_plane_icp(
+            &surface,
+            &target_ds.points,
+            &plane_pose,
+            &options.icp_options,
+        )?)
+    } else {
+        None
+    };
+    let pose = icp.map_or(plane_pose, |r| r.pose);
+    clock.lap("icp");
+
+    // Observability of the final problem.
+    let mut plane_info = Matrix3::zeros();
+    for &(i, _) in &matches {
+        let n = ref_f[i].plane.normal.into_inner();
+        plane_info += n * n.transpose();
+    }
+    let plane_translation_share = weakest_direction(&plane_info).1;
+    let (weakest_translation, weakest_rotation) = match (&icp, &report) {
+        (Some(r), _) => (r.weakest_translation(), r.weakest_rotation()),
+        (None, Some(rep)) => (
+            weakest_direction(&rep.hessian.fixed_view::<3, 3>(0, 0).into_owned()),
+            weakest_direction(&rep.hessian.fixed_view::<3, 3>(3, 3).into_owned()),
+        ),
+        (None, None) => ((Vector3::x(), 0.0), (Vector3::x(), 0.0)),
+    };
+    let source = if icp.is_some() {
+        "the point-to-plane ICP"
+    } else {
+        "the matched planes"
+    };
+    let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
+    if weakest_translation.1 < options.min_information_share {
+        return Err(Error::Calibration(format!(
+            "the scene does not constrain the translation along {} (reference frame): it holds \
+             {:.2} % of the translation information of {source} (< {:.2} %); the matched planes' \
+             normals span {} direction(s) (as in a corridor or a straight street with only \
+             ground and parallel walls); add structure across that direction (a cross wall, \
+             poles, a building corner)",
+            fmt(&weakest_translation.0),
+            100.0 * weakest_translation.1,
+            100.0 * options.min_information_share,
+            if plane_translation_share > 1e-3 {
+                3
+            } else if matches.len() > 1 {
+                2
+            } else {
+                1
+            },
+        )));
+    }
+    if weakest_rotation.1 < options.min_information_share {
+        return Err(Error::Calibration(format!(
+            "the scene does not constrain the rotation about {} (reference frame): it holds \
+             {:.2} % of the rotation information of {source} (< {:.2} %)",
+            fmt(&weakest_rotation.0),
+            100.0 * weakest_rotation.1,
+            100.0 * options.min_information_share
+        )));
+    }
+
+    // Matched planes, their input indices and residuals at the result.
+    let expand = |prepared: &Prepared, f: &PlaneFeature| -> Vec<usize> {
+        let mut inlier_voxel = vec![false; prepared.points.len()];
+        for &v in &f.voxels {
+            if let Some(slot) = inlier_voxel.get_mut(v) {
+                *slot = true;
+            }
+        }
+        prepared
+            .owner
+            .iter()
+            .enumerate()
+            .filter(|(_, &v)| inlier_voxel.get(v).copied().unwrap_or(false))
+            .map(|(i, _)| i)
+            .collect()
+    };
+    let group_rms = problem.as_ref().map(|p| p.group_rms(&pose));
+    let mut rmse = Vec::with_capacity(matches.len());
+    for (k, &(i, j)) in matches.iter().enumerate() {
+        let (n_t, n_r) = (tgt_f[j].voxels.len() as f64, ref_f[i].voxels.len() as f64);
+        let value = group_rms.as_ref().map_or(f64::NAN, |g| {
+            let (a, b) = (g[2 * k], g[2 * k + 1]);
+            ((a * a * n_t + b * b * n_r) / (n_t + n_r)).sqrt()
+        });
+        rmse.push(value);
+    }
+    let covariance = match (&icp, &report) {
+        (Some(r), _) => r.covariance,
+        (None, Some(rep)) => rep.covariance(),
+        _ => None,
+    };
+    let result = TargetlessCalibration {
+        reference_from_target: pose,
+        initial_reference_from_target: winner.pose,
+        planes_reference: matches.iter().map(|&(i, _)| ref_f[i].plane).collect(),
+        planes_target: matches.iter().map(|&(_, j)| tgt_f[j].plane).collect(),
+        inliers_reference: matches
+            .iter()
+            .map(|&(i, _)| expand(&reference_ds, &ref_f[i]))
+            .collect(),
+        inliers_target: matches
+            .iter()
+            .map(|&(_, j)| expand(&target_ds, &tgt_f[j]))
+            .collect(),
+        rmse,
+        hypotheses: [enumerated, candidates.len()],
+        verified: verified.len(),
+        triplet: winner.free.is_none(),
+        best_score,
+        second_score,
+        distance_thresholds: [reference_ds.threshold, target_ds.threshold],
+        report,
+        icp,
+        weakest_translation,
+        weakest_rotation,
+        plane_translation_share,
+        covariance,
+        timings: Timings::default(),
+        features: [reference_ds.features, target_ds.features],
+    };
+    clock.lap("check");
+    Ok(TargetlessCalibration {
+        timings: clock.finish(),
+        ..result
+    })
+}
+
+/// The rotation angle (radians) and translation distance (metres) between two transforms:
+/// `angle(R_a R_b^T)` and `|t_a - t_b|`.
+pub fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
+    let r = (a.rotation * b.rotation.inverse()).to_rotation_matrix();
+    (
+        rotation_angle(&r),
+        (a.translation.vector - b.translation.vector).norm(),
+    )
+}

@@ -1,0 +1,508 @@
+//! Point-to-plane ICP between two whole clouds, robust to partial overlap, and the helpers it
+//! needs: voxel downsampling and per-point normals.
+//!
+//! * [`voxel_downsample`] replaces the points of each cubic voxel by their centroid (and says
+//!   which voxel every input point fell in), which evens out the density of a spinning LiDAR
+//!   (dense near the sensor, sparse far away) and bounds the work.
+//! * [`SurfaceCloud`] is the reference side of ICP: the points, an R*-tree over them (the
+//!   [`rstar`] crate: pure Rust, no threads of its own) and a unit normal per point from the
+//!   principal axes of its [`NORMAL_NEIGHBOURS`] nearest neighbours. Points whose neighbourhood is
+//!   not flat (foliage, edges: surface variation above [`MAX_SURFACE_VARIATION`]) get no normal and
+//!   are never used as correspondences.
+//! * [`point_to_plane_icp`] aligns a target cloud to it. Each iteration pairs every sampled target
+//!   point with its nearest reference point within the current correspondence distance, weights
+//!   the point-to-plane residual `n . (T p - q)` with a Cauchy loss at a third of that distance,
+//!   and takes one Gauss–Newton step on SE(3) (left perturbation, as in [`crate::lm`]). The
+//!   distance shrinks geometrically from `max_distance` to `min_distance`, so the start may be a
+//!   few decimetres off, and points without a counterpart (the part of each scan the other
+//!   sensor does not see) find none and drop out: that is what makes it robust to partial
+//!   overlap.
+//!
+//! The result carries the information matrix `J^T W J` at the solution. Its translation block
+//! `sum w n n^T` says how well each direction of translation is constrained: along a corridor
+//! (floor and parallel walls only) every normal is perpendicular to the corridor and the block is
+//! singular; [`IcpResult::weakest_translation`] reports the weakest direction and its share of the
+//! information, which the targetless calibration uses to refuse such scenes.
+//!
+//! Everything is deterministic: samples are a fixed stride, sums run in fixed chunks
+//! ([`crate::lm::accumulate`]), and the same input gives the same output on any thread count.
+//!
+//! ```
+//! use lidarcal::icp::{point_to_plane_icp, IcpOptions, SurfaceCloud};
+//! use lidarcal::geometry::se3_exp;
+//! use nalgebra::{Isometry3, Point3, Vector6};
+//!
+//! // Three orthogonal planar patches (an open box corner), 10 cm grid.
+//! let mut points = Vec::new();
+//! for i in 0..40 {
+//!     for j in 0..40 {
+//!         let (a, b) = (i as f64 * 0.1, j as f64 * 0.1);
+//!         points.push(Point3::new(a, b, 0.0));
+//!         points.push(Point3::new(a, 0.0, b));
+//!         points.push(Point3::new(0.0, a, b));
+//!     }
+//! }
+//! let truth = se3_exp(&Vector6::new(0.05, -0.03, 0.02, 0.01, -0.02, 0.015));
+//! let target: Vec<_> = points.iter().map(|p| truth.inverse() * p).collect();
+//! let reference = SurfaceCloud::new(points)?;
+//! let result = point_to_plane_icp(&reference, &target, &Isometry3::identity(), &IcpOptions::default())?;
+//! let error = result.pose.inverse() * truth;
+//! assert!(error.translation.vector.norm() < 1e-3 && error.rotation.angle() < 1e-3);
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+
+use std::collections::HashMap;
+use std::sync::OnceLock;
+
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
+use rstar::primitives::GeomWithData;
+use rstar::RTree;
+
+use crate::error::{ensure_finite, Error, Result};
+use crate::fit::Moments;
+use crate::geometry::se3_exp;
+use crate::lm::{accumulate, Accumulator, Loss, NormalEquations};
+
+/// Neighbours used to estimate each reference point's normal.
+pub const NORMAL_NEIGHBOURS: usize = 10;
+/// Largest surface variation `l0 / (l0 + l1 + l2)` of a neighbourhood that still counts as a
+/// surface (0 for a perfect plane, 1/3 for isotropic scatter).
+pub const MAX_SURFACE_VARIATION: f64 = 0.08;
+/// Largest voxel count along one axis accepted by [`voxel_downsample`].
+const MAX_VOXEL_INDEX: f64 = 1e12;
+
+/// Centroids of the points of each cubic voxel of side `voxel`, in the order the voxels are first
+/// met, and for every input point the index of its voxel (its centroid) in the output.
+///
+/// Errors for a non-positive or non-finite voxel, non-finite points, or a voxel so small that the
+/// coordinates overflow.
+pub fn voxel_downsample(
+    points: &[Point3<f64>],
+    voxel: f64,
+) -> Result<(Vec<Point3<f64>>, Vec<usize>)> {
+    if !(voxel.is_finite() && voxel > 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "voxel size must be finite and positive, got {voxel}"
+        )));
+    }
+    ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+    let mut index: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 2);
+    let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new();
+    let mut owner = Vec::with_capacity(points.len());
+    for p in points {
+        let mut key = [0i64; 3];
+        for (k, c) in key.iter_mut().zip(p.coords.iter()) {
+            let f = (c / voxel).floor();
+            if f.abs() > MAX_VOXEL_INDEX {
+                return Err(Error::InvalidInput(format!(
+                    "coordinate {c} is too large for a voxel of {voxel} m"
+                )));
+            }
+            *k = f as i64;
+        }
+        let next = sums.len();
+        let slot = *index.entry(key).or_insert(next);
+        if slot == next {
+            sums.push((Vector3::zeros(), 0));
+        }
+        if let Some(s) = sums.get_mut(slot) {
+            s.0 += p.coords;
+            s.1 += 1;
+        }
+        owner.push(slot);
+    }
+    let centroids = sums
+        .into_iter()
+        .map(|(sum, n)| Point3::from(sum / n.max(1) as f64))
+        .collect();
+    Ok((centroids, owner))
+}
+
+type Indexed = GeomWithData<[f64; 3], usize>;
+
+/// The reference side of ICP: points, an R*-tree and per-point normals (see the module docs).
+///
+/// Normals are computed lazily, the first time a point is used as a correspondence, and cached:
+/// ICP touches only the part of the reference the target overlaps. A normal is a pure function of
+/// the point's neighbourhood, so the order of first use (thread scheduling) changes nothing.
+#[derive(Debug, Clone)]
+pub struct SurfaceCloud {
+    points: Vec<Point3<f64>>,
+    normals: Vec<OnceLock<Option<Vector3<f64>>>>,
+    tree: RTree<Indexed>,
+}
+
+impl SurfaceCloud {
+    /// Indexes `points` and estimates their normals. Needs at least [`NORMAL_NEIGHBOURS`] finite
+    /// points.
+    pub fn new(points: Vec<Point3<f64>>) -> Result<Self> {
+        ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+        if points.len() < NORMAL_NEIGHBOURS {
+            return Err(Error::InvalidInput(format!(
+                "a surface cloud needs at least {NORMAL_NEIGHBOURS} points, got {}",
+                points.len()
+            )));
+        }
+        let tree = RTree::bulk_load(
+            points
+                .iter()
+                .enumerate()
+                .map(|(i, p)| Indexed::new([p.x, p.y, p.z], i))
+                .collect(),
+        );
+        let normals = (0..points.len()).map(|_| OnceLock::new()).collect();
+        Ok(SurfaceCloud {
+            points,
+            normals,
+            tree,
+        })
+    }
+
+    fn estimate_normal(&self, p: &Point3<f64>) -> Option<Vector3<f64>> {
+        let mut m = Moments::new(*p);
+        for n in self
+            .tree
+            .nearest_neighbor_iter(&[p.x, p.y, p.z])
+            .take(NORMAL_NEIGHBOURS)
+        {
+            if let Some(q) = self.points.get(n.data) {
+                m.add(q);
+            }
+        }
+        let (values, vectors) = m.principal_axes();
+        let total = values[0] + values[1] + values[2];
+        (total > 0.0 && values[0] <= MAX_SURFACE_VARIATION * total).then_some(vectors[0])
+    }
+
+    /// The points.
+    pub fn points(&self) -> &[Point3<f64>] {
+        &self.points
+    }
+
+    /// The unit normal of point `i`, or `None` where the neighbourhood is not a surface.
+    pub fn normal(&self, i: usize) -> Option<Vector3<f64>> {
+        let (cell, p) = (self.normals.get(i)?, self.points.get(i)?);
+        *cell.get_or_init(|| self.estimate_normal(p))
+    }
+
+    /// The nearest point to `q` within `max_distance`: `(index, squared distance)`.
+    pub fn nearest(&self, q: &Point3<f64>, max_distance: f64) -> Option<(usize, f64)> {
+        let (n, d2) = self
+            .tree
+            .nearest_neighbor_iter_with_distance_2(&[q.x, q.y, q.z])
+            .next()?;
+        (d2 <= max_distance * max_distance).then_some((n.data, d2))
+    }
+
+    /// Fraction of `points` with a reference point within `distance`.
+    pub fn overlap(&self, points: &[Point3<f64>], distance: f64) -> f64 {
+        if points.is_empty() {
+            return 0.0;
+        }
+        let near = points
+            .iter()
+            .filter(|p| self.nearest(p, distance).is_some())
+            .count();
+        near as f64 / points.len() as f64
+    }
+}
+
+/// Options of [`point_to_plane_icp`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IcpOptions {
+    /// Correspondence distance of the first iteration (metres).
+    pub max_distance: f64,
+    /// Correspondence distance it shrinks to (metres).
+    pub min_distance: f64,
+    /// Factor applied to the distance after each iteration (in `(0, 1]`).
+    pub shrink: f64,
+    /// Upper bound on iterations.
+    pub max_iterations: usize,
+    /// Target points used (at most, by a fixed stride).
+    pub samples: usize,
+    /// Stop once the distance has reached `min_distance` and a step moves less than this
+    /// (tangent norm: metres and radians together).
+    pub step_tolerance: f64,
+}
+
+impl Default for IcpOptions {
+    fn default() -> Self {
+        IcpOptions {
+            max_distance: 1.0,
+            min_distance: 0.2,
+            shrink: 0.7,
+            max_iterations: 30,
+            samples: 2000,
+            step_tolerance: 1e-5,
+        }
+    }
+}
+
+impl IcpOptions {
+    fn validate(&self) -> Result<()> {
+        let ok = self.min_distance.is_finite()
+            && self.min_distance > 0.0
+            && self.max_distance.is_finite()
+            && self.max_distance >= self.min_distance
+            && self.shrink > 0.0
+            && self.shrink <= 1.0
+            && self.step_tolerance >= 0.0
+            && self.max_iterations > 0
+            && self.samples > 0;
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::InvalidInput(format!(
+                "ICP options out of range: need 0 < min_distance <= max_distance, shrink in (0, 1], \
+                 step_tolerance >= 0, max_iterations and samples >= 1; got {self:?}"
+            )))
+        }
+    }
+}
+
+/// The result of [`point_to_plane_icp`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IcpResult {
+    /// The refined `reference_from_target`.
+    pub pose: Isometry3<f64>,
+    /// Iterations run.
+    pub iterations: usize,
+    /// `true` when the last step was below the tolerance at the final distance.
+    pub converged: bool,
+    /// Correspondences of the last iteration.
+    pub correspondences: usize,
+    /// Fraction of the sampled target points with a correspondence at the final distance.
+    pub fitness: f64,
+    /// Root-mean-square point-to-plane residual of the correspondences (metres).
+    pub rmse: f64,
+    /// `J^T W J` at the solution (tangent `[rho; phi]`, left perturbation), Cauchy-weighted.
+    pub information: Matrix6<f64>,
+    /// Covariance `s^2 (J^T W J)^-1` with `s^2` the weighted residual variance; `None` when the
+    /// information matrix is singular.
+    pub covariance: Option<Matrix6<f64>>,
+}
+
+/// The weakest direction of a symmetric positive semi-definite 3x3 block and its share of the
+/// trace: `(unit direction, smallest eigenvalue / trace)`.
+pub fn weakest_direction(block: &Matrix3<f64>) -> (Vector3<f64>, f64) {
+    let eig = SymmetricEigen::new(*block);
+    let mut k = 0;
+    for i in 1..3 {
+        if eig.eigenvalues[i] < eig.eigenvalues[k] {
+            k = i;
+        }
+    }
+    let trace = block.trace();
+    let share = if trace > 0.0 {
+        (eig.eigenvalues[k] / trace).max(0.0)
+    } else {
+        0.0
+    };
+    (eig.eigenvectors.column(k).into_owned(), share)
+}
+
+impl IcpResult {
+    /// The least-constrained direction of translation (reference frame) and its share of the
+    /// translation information (`0` = unconstrained, `1/3` = isotropic).
+    pub fn weakest_translation(&self) -> (Vector3<f64>, f64) {
+        weakest_direction(&self.information.fixed_view::<3, 3>(0, 0).into_owned())
+    }
+
+    /// The least-constrained rotation axis and its share of the rotation information.
+    pub fn weakest_rotation(&self) -> (Vector3<f64>, f64) {
+        weakest_direction(&self.information.fixed_view::<3, 3>(3, 3).into_owned())
+    }
+}
+
+/// Normal equations plus the count of correspondences and the sum of squared residuals.
+#[derive(Debug, Clone, Copy, Default)]
+struct IcpSums {
+    ne: NormalEquations,
+    matched: usize,
+    squared: f64,
+    weight: f64,
+}
+
+impl Accumulator for IcpSums {
+    fn merge(&mut self, o: &Self) {
+        self.ne.merge(&o.ne);
+        self.matched += o.matched;
+        self.squared += o.squared;
+        self.weight += o.weight;
+    }
+}
+
+fn linearise(
+    reference: &SurfaceCloud,
+    samples: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    distance: f64,
+) -> IcpSums {
+    let loss = Loss::Cauchy {
+        scale: distance / 3.0,
+    };
+    let mut sums: IcpSums = accumulate(samples, |p, acc: &mut IcpSums| {
+        let q = pose * p;
+        let Some((i, _)) = reference.nearest(&q, distance) else {
+            return;
+        };
+        let (Some(n), Some(r_point)) = (reference.normal(i), reference.points.get(i)) else {
+            return;
+        };
+        let r = n.dot(&(q - r_point));
+        let c = q.coords.cross(&n);
+        let j = Vector6::new(n.x, n.y, n.z, c.x, c.y, c.z);
+        acc.ne.add(r, &j, loss);
+        acc.matched += 1;
+        let w = loss.weight(r * r);
+        acc.squared += w * r * r;
+        acc.weight += w;
+    });
+    sums.ne.symmetrize();
+    sums
+}
+
+/// Aligns `target` (points in the target frame) to `reference`, starting from `initial`
+/// (`reference_from_target`). See the module docs.
+///
+/// Errors: [`Error::InvalidInput`] for bad options or points; [`Error::Calibration`] when fewer
+/// than 6 correspondences are found (the clouds do not overlap at this start).
+pub fn point_to_plane_icp(
+    reference: &SurfaceCloud,
+    target: &[Point3<f64>],
+    initial: &Isometry3<f64>,
+    options: &IcpOptions,
+) -> Result<IcpResult> {
+    options.validate()?;
+    ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
+    let stride = target.len().div_ceil(options.samples).max(1);
+    let samples: Vec<Point3<f64>> = target.iter().step_by(stride).copied().collect();
+    let mut pose = *initial;
+    let mut distance = options.max_distance;
+    let mut iterations = 0;
+    let mut converged = false;
+    while iterations < options.max_iterations {
+        iterations += 1;
+        let sums = linearise(reference, &samples, &pose, distance);
+        if sums.matched < 6 {
+            return Err(Error::Calibration(format!(
+                "ICP found only {} correspondences within {distance:.2} m: the clouds do not \
+                 overlap at this pose",
+                sums.matched
+            )));
+        }
+        let h = sums.ne.hessian;
+        // A floor on the damping keeps unobserved directions (a corridor) from moving.
+        let floor = 1e-9 * h.diagonal().amax().max(f64::MIN_POSITIVE);
+        let damped = h + Matrix6::identity() * floor;
+        let Some(step) = damped.cholesky().map(|c| c.solve(&(-sums.ne.gradient))) else {
+            return Err(Error::Numerical(
+                "ICP normal equations are not positive definite".into(),
+            ));
+        };
+        if !step.iter().all(|x| x.is_finite()) {
+            return Err(Error::Numerical("ICP produced a non-finite step".into()));
+        }
+        pose = se3_exp(&step) * pose;
+        let at_final = distance <= options.min_distance;
+        if at_final && step.norm() < options.step_tolerance {
+            converged = true;
+            break;
+        }
+        distance = (distance * options.shrink).max(options.min_distance);
+    }
+    let sums = linearise(reference, &samples, &pose, distance);
+    let information = sums.ne.hessian;
+    let dof = sums.weight - 6.0;
+    let covariance = if dof > 0.0 {
+        let sigma2 = sums.squared / dof;
+        information.cholesky().map(|c| c.inverse() * sigma2)
+    } else {
+        None
+    };
+    Ok(IcpResult {
+        pose,
+        iterations,
+        converged,
+        correspondences: sums.matched,
+        fitness: sums.matched as f64 / samples.len().max(1) as f64,
+        rmse: if sums.weight > 0.0 {
+            (sums.squared / sums.weight).sqrt()
+        } else {
+            0.0
+        },
+        information,
+        covariance,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn voxel_downsample_keeps_order_and_owners() {
+        let pts = vec![
+            Point3::new(0.05, 0.05, 0.0),
+            Point3::new(1.05, 0.0, 0.0),
+            Point3::new(0.15, 0.05, 0.0),
+        ];
+        let (c, owner) = voxel_downsample(&pts, 0.5).unwrap();
+        assert_eq!(c.len(), 2);
+        assert_eq!(owner, vec![0, 1, 0]);
+        assert!((c[0].x - 0.1).abs() < 1e-12);
+        assert!(voxel_downsample(&pts, 0.0).is_err());
+        assert!(voxel_downsample(&[Point3::new(f64::NAN, 0.0, 0.0)], 1.0).is_err());
+    }
+
+    #[test]
+    fn corridor_translation_is_reported_unconstrained() {
+        // Floor and two parallel walls along x: no information along x.
+        let mut pts = Vec::new();
+        for i in 0..200 {
+            for j in 0..20 {
+                let x = i as f64 * 0.1;
+                let s = j as f64 * 0.1;
+                pts.push(Point3::new(x, s - 1.0, 0.0));
+                pts.push(Point3::new(x, -1.0, s));
+                pts.push(Point3::new(x, 1.0, s));
+            }
+        }
+        let reference = SurfaceCloud::new(pts.clone()).unwrap();
+        let r = point_to_plane_icp(
+            &reference,
+            &pts,
+            &Isometry3::identity(),
+            &IcpOptions::default(),
+        )
+        .unwrap();
+        let (dir, share) = r.weakest_translation();
+        assert!(share < 1e-6, "{share}");
+        assert!(dir.x.abs() > 0.999, "{dir}");
+    }
+
+    #[test]
+    fn bad_options_and_disjoint_clouds() {
+        let pts: Vec<_> = (0..100)
+            .map(|i| Point3::new((i % 10) as f64, (i / 10) as f64, 0.0))
+            .collect();
+        let reference = SurfaceCloud::new(pts.clone()).unwrap();
+        let bad = IcpOptions {
+            min_distance: 2.0,
+            max_distance: 1.0,
+            ..IcpOptions::default()
+        };
+        assert!(point_to_plane_icp(&reference, &pts, &Isometry3::identity(), &bad).is_err());
+        let far: Vec<_> = pts.iter().map(|p| p + Vector3::z() * 50.0).collect();
+        assert!(matches!(
+            point_to_plane_icp(
+                &reference,
+                &far,
+                &Isometry3::identity(),
+                &IcpOptions::default()
+            ),
+            Err(Error::Calibration(_))
+        ));
+        assert!(SurfaceCloud::new(pts[..3].to_vec()).is_err());
+    }
+}
