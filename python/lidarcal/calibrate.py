@@ -28,11 +28,16 @@ from lidarcal._lidarcal import (
 )
 
 Method = Literal["auto", "planes", "targetless", "poles"]
+Vendor = Literal["velodyne", "hesai", "leishen", "robosense"]
 F64Array = npt.NDArray[np.float64]
 
 #: Distance (m) within which a mapped target point counts as agreeing with the reference cloud
 #: when ``method="auto"`` compares the methods' results.
 AGREEMENT_DISTANCE = 0.25
+
+#: ``method="auto"`` prefers the earlier method (corner, targetless, poles) when its agreement is
+#: within this fraction of the best.
+AUTO_TIE = 0.01
 
 #: A target pair is calibrated directly in :func:`calibrate_rig` only when the result brings at
 #: least this fraction of its points onto the other cloud.
@@ -52,25 +57,36 @@ def calibrate(
     method: Method = "auto",
     *,
     seed: int = 0,
+    up: npt.ArrayLike | None = None,
+    distance_threshold: float | None = None,
+    intensity_threshold: float | None = None,
+    vendor: Vendor | None = None,
 ) -> CalibrationResult:
     """Calibrates ``reference_from_target`` with one method, or the best of all for ``"auto"``.
+
+    The options go to the methods that take them: ``up`` to the corner method,
+    ``distance_threshold`` to the corner and targetless methods, ``intensity_threshold`` and
+    ``vendor`` to the poles.
 
     ``"planes"`` is :func:`lidarcal.calibrate_planes` (a wall corner), ``"targetless"``
     :func:`lidarcal.calibrate_targetless` (the planes of any scene, e.g. a street), ``"poles"``
     :func:`lidarcal.calibrate_poles` (needs ``(N, 4)`` clouds with intensity). ``"auto"`` runs
     every applicable method and returns the result with the largest fraction of target points
-    within 25 cm of a reference point (ties to the earlier method in that order); the result's
-    ``method`` names it. Raises :class:`CalibrationError` listing each method's reason when none
-    succeeds, ``ValueError`` for malformed input or an unknown method.
+    within 25 cm of a reference point; results within 0.01 of the best count as a tie, which the
+    earlier method in that order wins. The result's ``method`` names it. Raises
+    :class:`CalibrationError` listing each method's reason when none succeeds, ``ValueError`` for
+    malformed input or an unknown method.
     """
     ref = _cloud(reference, "reference")
     tgt = _cloud(target, "target")
     if method == "planes":
-        return calibrate_planes(ref, tgt, seed=seed)
+        return calibrate_planes(ref, tgt, seed=seed, up=up, distance_threshold=distance_threshold)
     if method == "targetless":
-        return calibrate_targetless(ref, tgt, seed=seed)
+        return calibrate_targetless(ref, tgt, seed=seed, distance_threshold=distance_threshold)
     if method == "poles":
-        return calibrate_poles(ref, tgt, seed=seed)
+        return calibrate_poles(
+            ref, tgt, seed=seed, intensity_threshold=intensity_threshold, vendor=vendor
+        )
     if method != "auto":
         raise ValueError(
             f"method must be 'auto', 'planes', 'targetless' or 'poles', got {method!r}"
@@ -81,7 +97,17 @@ def calibrate(
         candidates.append("poles")
     for name in candidates:
         try:
-            tried.append((name, calibrate(ref, tgt, name, seed=seed)))  # type: ignore[arg-type]
+            result = calibrate(
+                ref,
+                tgt,
+                name,  # type: ignore[arg-type]
+                seed=seed,
+                up=up,
+                distance_threshold=distance_threshold,
+                intensity_threshold=intensity_threshold,
+                vendor=vendor,
+            )
+            tried.append((name, result))
         except CalibrationError as e:
             tried.append((name, str(e)))
     results = [(n, r) for n, r in tried if isinstance(r, CalibrationResult)]
@@ -89,7 +115,10 @@ def calibrate(
         reasons = "; ".join(f"{n}: {r}" for n, r in tried)
         raise CalibrationError(f"no method calibrated this pair ({reasons})")
     scores = [overlap(ref, tgt, r.transform, AGREEMENT_DISTANCE) for _, r in results]
-    return results[int(np.argmax(scores))][1]
+    # Within AUTO_TIE of the best, the earlier (more specific) method wins: a 25 cm agreement
+    # cannot tell a corner calibration from a whole-scene one that is 0.2 deg different.
+    best = max(scores)
+    return next(r for (_, r), s in zip(results, scores, strict=True) if s >= best - AUTO_TIE)
 
 
 @dataclass(frozen=True)

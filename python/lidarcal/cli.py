@@ -24,12 +24,12 @@ from typing import Any
 import click
 import numpy as np
 
+import lidarcal
 from lidarcal import (
     CalibrationError,
     CalibrationResult,
     __version__,
     calibrate_planes,
-    calibrate_poles,
     read_points,
     sim,
 )
@@ -300,23 +300,18 @@ def load_cloud(
 def _calibrate(
     method: str, reference: np.ndarray, target: np.ndarray, options: dict[str, Any]
 ) -> CalibrationResult:
-    if method == "planes":
-        return calibrate_planes(
-            reference[:, :3],
-            target[:, :3],
-            up=options["up"],
-            distance_threshold=options["threshold"],
-            seed=options["seed"],
-        )
-    if reference.shape[1] < 4 or target.shape[1] < 4:
+    if method == "poles" and (reference.shape[1] < 4 or target.shape[1] < 4):
         which = "reference" if reference.shape[1] < 4 else "target"
         raise ValueError(f"--method poles needs intensity, and the {which} file has none")
-    return calibrate_poles(
+    return lidarcal.calibrate(
         reference,
         target,
+        method,  # type: ignore[arg-type]
+        seed=options["seed"],
+        up=options["up"],
+        distance_threshold=options["threshold"],
         intensity_threshold=options["intensity_threshold"],
         vendor=options["vendor"],
-        seed=options["seed"],
     )
 
 
@@ -368,10 +363,12 @@ def _plot(
 @click.argument("targets", nargs=-1, required=True, type=SourceType())
 @click.option(
     "--method",
-    type=click.Choice(["planes", "poles"]),
-    default="planes",
+    type=click.Choice(["auto", "planes", "targetless", "poles"]),
+    default="auto",
     show_default=True,
-    help="planes: a wall corner (three planes) seen by both sensors. poles: two or more poles "
+    help="auto: try every method that applies and keep the one under which most target points "
+    "land on the reference. planes: a wall corner (three planes) seen by both sensors. "
+    "targetless: the planes of any scene (streets, facades, ground). poles: two or more poles "
     "wrapped in retro-reflective tape (the clouds need intensity).",
 )
 @click.option(
@@ -386,7 +383,9 @@ def _plot(
     "upright sensors; used only to tell the walls of a right-angled corner apart.",
 )
 @click.option(
-    "--threshold", type=float, help="planes: RANSAC inlier distance (m); default from the noise."
+    "--threshold",
+    type=float,
+    help="planes, targetless: RANSAC inlier distance (m); default from the noise.",
 )
 @click.option(
     "--intensity-threshold", type=float, help="poles: intensity above which a return is tape."
