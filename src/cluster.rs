@@ -32,7 +32,7 @@ use std::ops::ControlFlow;
 
 use nalgebra::Point3;
 
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 
 /// Largest number of cells along one axis a grid accepts (cell coordinates must fit an `i64` with
 /// room for the neighbour offsets; this also refuses absurdly small cells for huge extents).
@@ -55,7 +55,7 @@ impl<'a> Grid<'a> {
                 "grid cell size must be finite and positive, got {cell}"
             )));
         }
-        ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+        crate::error::ensure_points("points", points.iter())?;
         let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
         for (i, p) in points.iter().enumerate() {
             let key = Self::key_of(p, cell)?;

@@ -40,7 +40,7 @@
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::{Stopwatch, Timings};
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 use crate::fit::Moments;
 use crate::geometry::se3_log;
 use crate::geometry::Plane;
@@ -341,7 +341,7 @@ fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
             points.len()
         )));
     }
-    ensure_finite(which, points.iter().flat_map(|p| p.coords.iter()))
+    crate::error::ensure_points(which, points.iter())
 }
 
 /// Matches the planes and returns the chosen cyclic shift with its rotation.

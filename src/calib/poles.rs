@@ -404,6 +404,7 @@ fn check_cloud(points: &[Point3<f64>], intensities: &[f64], which: &str) -> Resu
             bad.len()
         )));
     }
+    crate::error::ensure_points(&format!("the {which} cloud"), points.iter())?;
     let bad = intensities.iter().filter(|x| !x.is_finite()).count();
     if let Some(first) = intensities.iter().position(|x| !x.is_finite()) {
         return Err(Error::InvalidInput(format!(
