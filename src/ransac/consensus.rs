@@ -159,6 +159,9 @@ pub fn ransac<E: Estimator>(
     let (mut drawn, mut scored, mut point_tests) = (0usize, 0usize, 0u64);
     let mut batch = 0u64;
     while drawn < required {
+        if let Some(deadline) = &options.deadline {
+            deadline.check(&format!("RANSAC ({} search)", E::NAME))?;
+        }
         let len = BATCH.min(options.max_iterations - drawn);
         let samples = draw_batch(options.seed, batch, len, s, n_search);
         batch += 1;

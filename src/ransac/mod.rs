@@ -64,6 +64,8 @@ pub struct RansacOptions {
     pub local_optimization_rounds: usize,
     /// Seed of the sampler.
     pub seed: u64,
+    /// Stop with an error once this deadline passes (checked between batches of hypotheses).
+    pub deadline: Option<crate::budget::Deadline>,
 }
 
 impl RansacOptions {
@@ -76,6 +78,7 @@ impl RansacOptions {
             max_iterations: 10_000,
             local_optimization_rounds: 3,
             seed: 0,
+            deadline: None,
         }
     }
 
