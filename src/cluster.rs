@@ -32,7 +32,8 @@ use std::ops::ControlFlow;
 
 use nalgebra::Point3;
 
-use crate::error::{ensure_finite, Error, Result};
+use crate::budget::Deadline;
+use crate::error::{Error, Result};
 
 /// Largest number of cells along one axis a grid accepts (cell coordinates must fit an `i64` with
 /// room for the neighbour offsets; this also refuses absurdly small cells for huge extents).
@@ -55,7 +56,7 @@ impl<'a> Grid<'a> {
                 "grid cell size must be finite and positive, got {cell}"
             )));
         }
-        ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+        crate::error::ensure_points("points", points.iter())?;
         let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
         for (i, p) in points.iter().enumerate() {
             let key = Self::key_of(p, cell)?;
@@ -146,10 +147,25 @@ impl<'a> Grid<'a> {
 /// Returns every cluster (singletons included) as ascending point indices, clusters ordered by
 /// their smallest index. O(N) for a fixed tolerance and bounded density.
 pub fn euclidean_clusters(points: &[Point3<f64>], tolerance: f64) -> Result<Vec<Vec<usize>>> {
+    euclidean_clusters_until(points, tolerance, &Deadline::new(None))
+}
+
+/// Points expanded between two checks of the deadline in [`euclidean_clusters_until`].
+const DEADLINE_STRIDE: usize = 4096;
+
+/// [`euclidean_clusters`] that fails once `deadline` passes. A tolerance that joins a dense cloud
+/// into one cluster makes the search quadratic in the points of a cell (seconds for 100k points,
+/// tens of minutes for millions).
+pub fn euclidean_clusters_until(
+    points: &[Point3<f64>],
+    tolerance: f64,
+    deadline: &Deadline,
+) -> Result<Vec<Vec<usize>>> {
     let grid = Grid::new(points, tolerance)?;
     let mut label = vec![usize::MAX; points.len()];
     let mut clusters = Vec::new();
     let mut queue = VecDeque::new();
+    let mut expanded = 0usize;
     for seed in 0..points.len() {
         if label[seed] != usize::MAX {
             continue;
@@ -159,6 +175,10 @@ pub fn euclidean_clusters(points: &[Point3<f64>], tolerance: f64) -> Result<Vec<
         let mut members = vec![seed];
         queue.push_back(seed);
         while let Some(i) = queue.pop_front() {
+            expanded += 1;
+            if expanded.is_multiple_of(DEADLINE_STRIDE) {
+                deadline.check("clustering of the bright points")?;
+            }
             grid.for_each_within(&points[i], tolerance, |j, _| {
                 if label[j] == usize::MAX {
                     label[j] = id;

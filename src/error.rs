@@ -62,3 +62,32 @@ where
         ))),
     }
 }
+
+/// Largest accepted magnitude of a point coordinate (metres): 100 000 km. No LiDAR return is that
+/// far; such a value is corrupt data or a unit mistake. Below it every computation stays finite
+/// and accurate (a single return at 3e8 m beside a normal scan leaves a calibration unchanged; one
+/// at 1e9 m made it fail), and georeferenced clouds (UTM coordinates, ~1e7 m) pass.
+pub const MAX_COORDINATE: f64 = 1e8;
+
+/// [`ensure_finite`] for points, which must also lie within [`MAX_COORDINATE`] of the origin
+/// (per coordinate). The message names `what`, the count and the first offending point.
+pub(crate) fn ensure_points<'a, I>(what: &str, points: I) -> Result<()>
+where
+    I: IntoIterator<Item = &'a nalgebra::Point3<f64>>,
+    I::IntoIter: Clone,
+{
+    let points = points.into_iter();
+    ensure_finite(what, points.clone().flat_map(|p| p.coords.iter()))?;
+    let far = |p: &nalgebra::Point3<f64>| p.coords.iter().any(|c| c.abs() > MAX_COORDINATE);
+    let mut offending = points.enumerate().filter(|(_, p)| far(p));
+    let Some((first, p)) = offending.next() else {
+        return Ok(());
+    };
+    let count = offending.count() + 1;
+    let worst = p.coords.amax();
+    Err(Error::InvalidInput(format!(
+        "{what} has {count} point(s) with a coordinate beyond +/-{MAX_COORDINATE:e} m, the \
+         first at row {first} (|coordinate| = {worst:e}): no LiDAR return is that far (corrupt \
+         values or wrong units)"
+    )))
+}

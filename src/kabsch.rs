@@ -90,15 +90,39 @@ pub fn kabsch(
     ensure_finite("a", a.iter().flat_map(|v| v.iter()))?;
     ensure_finite("b", b.iter().flat_map(|v| v.iter()))?;
     let weight = |i: usize| weights.map_or(1.0, |w| w[i]);
+    // The rotation does not depend on the scale of the vectors or of the weights. Extreme scales
+    // (|v| near 1e300 overflows H, near 1e-300 underflows it to zero) are brought near 1 by a
+    // power of two, which is exact; ordinary input is left bit for bit as it was.
+    let vector_scale = power_of_two_scale(a.iter().chain(b).map(|v| v.amax()));
+    let weight_scale = power_of_two_scale(weights.unwrap_or_default().iter().copied());
 
     let mut h = Matrix3::zeros();
     let mut norms = 0.0;
     for (i, (ai, bi)) in a.iter().zip(b).enumerate() {
-        let w = weight(i);
+        let w = weight(i) * weight_scale;
+        let (ai, bi) = (ai * vector_scale, bi * vector_scale);
         h += ai * bi.transpose() * w;
         norms += w * (ai.norm_squared() + bi.norm_squared());
     }
-    solve(&h, norms)
+    let mut solution = solve(&h, norms)?;
+    // Back to the caller's units (inf when the true residual is not representable).
+    let unscale = vector_scale * vector_scale * weight_scale;
+    solution.residual /= unscale;
+    solution.singular_values /= unscale;
+    Ok(solution)
+}
+
+/// Magnitudes outside this range are rescaled before Kabsch accumulates products of them.
+const SAFE_MAGNITUDE: (f64, f64) = (1e-100, 1e100);
+
+/// `1` when the largest of `magnitudes` is inside [`SAFE_MAGNITUDE`] (or all are zero), else the
+/// power of two that brings it near 1.
+fn power_of_two_scale(magnitudes: impl Iterator<Item = f64>) -> f64 {
+    let largest = magnitudes.fold(0.0f64, f64::max);
+    if largest == 0.0 || (SAFE_MAGNITUDE.0..=SAFE_MAGNITUDE.1).contains(&largest) {
+        return 1.0;
+    }
+    2f64.powi((-largest.log2().round() as i32).clamp(-1000, 1000))
 }
 
 /// Rotation from the cross-covariance `h = sum w a b^T`; `norms = sum w (|a|^2 + |b|^2)`.
@@ -157,8 +181,8 @@ pub fn align_points(
     weights: Option<&[f64]>,
 ) -> Result<Isometry3<f64>> {
     check_inputs(a.len(), b.len(), weights)?;
-    ensure_finite("a", a.iter().flat_map(|p| p.coords.iter()))?;
-    ensure_finite("b", b.iter().flat_map(|p| p.coords.iter()))?;
+    crate::error::ensure_points("a", a.iter())?;
+    crate::error::ensure_points("b", b.iter())?;
     let weight = |i: usize| weights.map_or(1.0, |w| w[i]);
     let total: f64 = (0..a.len()).map(weight).sum();
     let mut ca = Vector3::zeros();

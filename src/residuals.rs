@@ -46,7 +46,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Vector3, Vector6};
 
 use crate::geometry::hat;
 
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 use crate::fit::Moments;
 use crate::geometry::{orthonormal_basis, Line, Plane};
 use crate::lm::{accumulate, Accumulator, LeastSquaresProblem, Loss, NormalEquations};
@@ -99,10 +99,7 @@ fn checked_count<'a>(
                 "{kind} group {index} has no points"
             )));
         }
-        ensure_finite(
-            &format!("points of {kind} group {index}"),
-            points.iter().flat_map(|p| p.coords.iter()),
-        )?;
+        crate::error::ensure_points(&format!("points of {kind} group {index}"), points.iter())?;
         count += points.len();
     }
     Ok(count)

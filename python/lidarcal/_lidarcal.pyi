@@ -191,6 +191,7 @@ def calibrate_planes(
     loss_scale: float | None = None,
     min_inliers: int = 50,
     max_iterations: int = 100,
+    time_budget_s: float | None = None,
 ) -> CalibrationResult: ...
 def calibrate_poles(
     reference: ArrayLike,
@@ -204,6 +205,7 @@ def calibrate_poles(
     cluster_tolerance: float = 0.5,
     min_points: int = 15,
     max_iterations: int = 100,
+    time_budget_s: float | None = None,
 ) -> CalibrationResult: ...
 def rqe(points: ArrayLike, sigma: float) -> float: ...
 

@@ -40,7 +40,8 @@
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::{Stopwatch, Timings};
-use crate::error::{ensure_finite, Error, Result};
+use crate::budget::Deadline;
+use crate::error::{Error, Result};
 use crate::fit::Moments;
 use crate::geometry::se3_log;
 use crate::geometry::Plane;
@@ -94,6 +95,9 @@ pub struct PlanarOptions {
     pub min_inliers: usize,
     /// Levenberg–Marquardt options.
     pub lm: LmOptions,
+    /// Wall-clock budget: past it the calibration stops with [`Error::Calibration`] (see
+    /// [`crate::budget`]); `None` for no limit.
+    pub time_budget: Option<std::time::Duration>,
 }
 
 impl Default for PlanarOptions {
@@ -109,6 +113,7 @@ impl Default for PlanarOptions {
                 cost_tolerance: CALIBRATION_COST_TOLERANCE,
                 ..LmOptions::default()
             },
+            time_budget: None,
         }
     }
 }
@@ -272,7 +277,12 @@ pub const IRLS_STEP_TOLERANCE: f64 = 1e-8;
 /// weighted problem exactly on its moments. The fixed point is a stationary point of the robust
 /// cost, the same estimate a robust Levenberg–Marquardt reaches, at a fraction of the passes
 /// over the points. The report is the last round's, with the robust cost at the start and end.
-fn irls(problem: &PointToPlane, start: &LmSolution, lm: &LmOptions) -> Result<LmSolution> {
+fn irls(
+    problem: &PointToPlane,
+    start: &LmSolution,
+    lm: &LmOptions,
+    deadline: &Deadline,
+) -> Result<LmSolution> {
     let smallest_sd = start
         .report
         .covariance()
@@ -288,6 +298,7 @@ fn irls(problem: &PointToPlane, start: &LmSolution, lm: &LmOptions) -> Result<Lm
     let mut iterations = start.report.iterations;
     let mut converged = false;
     for _ in 0..IRLS_MAX_ROUNDS {
+        deadline.check("the robust refinement")?;
         let weighted = problem.reweighted(&solution.pose)?;
         let next = solve(&weighted, &solution.pose, lm)?;
         iterations += next.report.iterations;
@@ -341,7 +352,7 @@ fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
             points.len()
         )));
     }
-    ensure_finite(which, points.iter().flat_map(|p| p.coords.iter()))
+    crate::error::ensure_points(which, points.iter())
 }
 
 /// Matches the planes and returns the chosen cyclic shift with its rotation.
@@ -435,6 +446,7 @@ pub fn calibrate_planes(
             )));
         }
     }
+    let deadline = Deadline::new(options.time_budget);
     let mut clock = Stopwatch::start();
 
     // Threshold and planes of each cloud; the two clouds are independent, so they run side by side.
@@ -446,6 +458,7 @@ pub fn calibrate_planes(
         let mut o = ExtractOptions::new(3, threshold);
         o.min_inliers = options.min_inliers;
         o.ransac.seed = options.seed;
+        o.ransac.deadline = Some(deadline);
         o.min_angle_between = Some(MIN_PLANE_ANGLE);
         let planes = extract_planes(points, &o).map_err(|e| with_cloud(e, which))?;
         Ok((threshold, right_handed(planes)))
@@ -464,6 +477,7 @@ pub fn calibrate_planes(
     let (threshold_tgt, found_tgt) = tgt_result?;
     let thresholds = [threshold_ref, threshold_tgt];
     clock.lap("planes");
+    deadline.check("plane extraction")?;
 
     let planes_ref = to_array(&found_ref.iter().map(|p| p.plane).collect::<Vec<_>>())?;
     let planes_tgt_rh = to_array(&found_tgt.iter().map(|p| p.plane).collect::<Vec<_>>())?;
@@ -541,6 +555,7 @@ pub fn calibrate_planes(
                     &PointToPlane::new(groups, loss)?,
                     &least_squares,
                     &options.lm,
+                    &deadline,
                 )?
             }
         };
@@ -632,7 +647,7 @@ mod tests {
             &lm,
         )
         .unwrap();
-        let via_irls = irls(&problem, &start, &lm).unwrap();
+        let via_irls = irls(&problem, &start, &lm, &Deadline::new(None)).unwrap();
         assert!(via_irls.report.converged());
         // IRLS stops once a round moves the pose by less than 1e-3 of its smallest standard
         // deviation: the two estimates must agree far inside the statistical uncertainty.

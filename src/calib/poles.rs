@@ -91,7 +91,8 @@
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::{Stopwatch, Timings};
-use crate::cluster::{euclidean_clusters, Grid};
+use crate::budget::Deadline;
+use crate::cluster::{euclidean_clusters_until, Grid};
 use crate::error::{Error, Result};
 use crate::fit::cylinder::fit_cylinder;
 use crate::fit::Moments;
@@ -228,6 +229,9 @@ pub struct PoleOptions {
     pub loss: Loss,
     /// Levenberg–Marquardt options.
     pub lm: LmOptions,
+    /// Wall-clock budget: past it the calibration stops with [`Error::Calibration`] (see
+    /// [`crate::budget`]); `None` for no limit.
+    pub time_budget: Option<std::time::Duration>,
 }
 
 impl Default for PoleOptions {
@@ -249,6 +253,7 @@ impl Default for PoleOptions {
                 cost_tolerance: 1e-10,
                 ..LmOptions::default()
             },
+            time_budget: None,
         }
     }
 }
@@ -404,6 +409,7 @@ fn check_cloud(points: &[Point3<f64>], intensities: &[f64], which: &str) -> Resu
             bad.len()
         )));
     }
+    crate::error::ensure_points(&format!("the {which} cloud"), points.iter())?;
     let bad = intensities.iter().filter(|x| !x.is_finite()).count();
     if let Some(first) = intensities.iter().position(|x| !x.is_finite()) {
         return Err(Error::InvalidInput(format!(
@@ -464,6 +470,21 @@ pub fn extract_poles(
     intensities: &[f64],
     options: &PoleOptions,
 ) -> Result<PoleExtraction> {
+    extract_poles_until(
+        points,
+        intensities,
+        options,
+        &Deadline::new(options.time_budget),
+    )
+}
+
+/// [`extract_poles`] against a deadline set by the caller.
+fn extract_poles_until(
+    points: &[Point3<f64>],
+    intensities: &[f64],
+    options: &PoleOptions,
+    deadline: &Deadline,
+) -> Result<PoleExtraction> {
     check_cloud(points, intensities, "input")?;
     check_options(options)?;
     let threshold = match (options.intensity_threshold, options.vendor) {
@@ -487,7 +508,7 @@ pub fn extract_poles(
         )));
     }
     let bright_points: Vec<Point3<f64>> = bright.iter().map(|&i| points[i]).collect();
-    let clusters = euclidean_clusters(&bright_points, options.cluster_tolerance)?;
+    let clusters = euclidean_clusters_until(&bright_points, options.cluster_tolerance, deadline)?;
     let mut poles = Vec::new();
     let mut rejected = Vec::new();
     for cluster in clusters {
@@ -846,11 +867,12 @@ pub fn calibrate_poles(
     check_cloud(reference, reference_intensities, "reference")?;
     check_cloud(target, target_intensities, "target")?;
     check_options(options)?;
+    let deadline = Deadline::new(options.time_budget);
     let mut clock = Stopwatch::start();
 
     let per_cloud = |points: &[Point3<f64>], intensities: &[f64], which: &str| {
-        let extraction =
-            extract_poles(points, intensities, options).map_err(|e| with_cloud(e, which))?;
+        let extraction = extract_poles_until(points, intensities, options, &deadline)
+            .map_err(|e| with_cloud(e, which))?;
         // The tape is left out: the front faces of two poles can pass for a plane.
         let dull: Vec<Point3<f64>> = points
             .iter()
@@ -874,6 +896,7 @@ pub fn calibrate_poles(
     let (ext_ref, ground_ref) = ref_result?;
     let (ext_tgt, ground_tgt) = tgt_result?;
     clock.lap("poles");
+    deadline.check("pole extraction")?;
 
     let clouds = Clouds {
         reference,
@@ -906,6 +929,7 @@ pub fn calibrate_poles(
     let grid = Grid::new(reference, options.overlap_distance)?;
     let evaluate =
         |b: &[(usize, usize, i8); 2]| -> Result<(Hypothesis, Isometry3<f64>, Option<LmReport>)> {
+            deadline.check("the pole hypotheses")?;
             let pairs: Vec<(Line, Line)> = b
                 .iter()
                 .map(|&(i, k, s)| (ext_ref.poles[i].axis, signed_axis(&ext_tgt.poles[k], s)))

@@ -139,7 +139,7 @@ pub fn fit_cylinder(
             points.len()
         )));
     }
-    ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+    crate::error::ensure_points("points", points.iter())?;
     ensure_finite(
         "initial line and viewpoint",
         initial

@@ -183,7 +183,7 @@ pub struct LineFit {
 }
 
 fn check_finite(points: &[Point3<f64>]) -> Result<()> {
-    crate::error::ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))
+    crate::error::ensure_points("points", points.iter())
 }
 
 /// Total-least-squares plane through `points`.

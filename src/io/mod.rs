@@ -193,7 +193,35 @@ pub fn write_points(
             "column name {bad:?} is not a plain word (letters, digits, '_' and '.')"
         )));
     }
+    if let Some((i, dup)) = names
+        .iter()
+        .enumerate()
+        .find(|(i, n)| names[..*i].contains(n))
+    {
+        return Err(Error::InvalidInput(format!(
+            "column name {dup:?} appears twice (columns {} and {i}): a reader could not tell \
+             them apart",
+            names.iter().position(|n| n == dup).unwrap_or(0)
+        )));
+    }
     crate::error::ensure_finite("points", data.iter())?;
+    if matches!(
+        format,
+        FileFormat::Pcd | FileFormat::Ply | FileFormat::Kitti
+    ) {
+        // These store float32: a larger value would be written as inf and dropped on reading.
+        if let Some(i) = data.iter().position(|v| v.abs() > f64::from(f32::MAX)) {
+            return Err(Error::InvalidInput(format!(
+                "{}: value {:e} (row {}, column {}) does not fit the float32 this format \
+                 stores (|v| <= {:e}); write a .npy file (float64) instead",
+                path.display(),
+                data[i],
+                i / names.len(),
+                i % names.len(),
+                f32::MAX
+            )));
+        }
+    }
     let mut bytes = Vec::new();
     match format {
         FileFormat::Pcd => {

@@ -41,6 +41,9 @@ use crate::sim::ScanPoint;
 const MAX_HEADER_BYTES: usize = 1 << 16;
 /// The largest expansion an LZF stream can achieve: a 3-byte back reference yields 264 bytes.
 const MAX_LZF_RATIO: usize = 88;
+/// Most values (sum of the fields' COUNTs) one point may hold. Descriptor fields reach a few
+/// hundred (VFH: 308, SHOT: 352); a larger COUNT is a corrupt header, refused before allocating.
+pub const MAX_VALUES_PER_POINT: usize = 1 << 16;
 
 /// How the data section is encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -196,6 +199,15 @@ fn parse_header(bytes: &[u8]) -> Result<Header> {
                         sizes.len(),
                         types.len(),
                         counts.len()
+                    )));
+                }
+                // Each element of a field becomes a column; bound them before anything is
+                // allocated per column (a corrupt COUNT once asked for 2e18 column names).
+                let values: usize = counts.iter().fold(0usize, |a, &c| a.saturating_add(c));
+                if values > MAX_VALUES_PER_POINT {
+                    return Err(bad(format!(
+                        "COUNT declares {values} values per point (at most \
+                         {MAX_VALUES_PER_POINT}): the header is corrupt"
                     )));
                 }
                 let mut fields = Vec::with_capacity(names.len());

@@ -530,9 +530,11 @@ fn up_arg(up: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(Vector3<f64>, Vecto
 /// refine: run the Levenberg–Marquardt refinement. loss: "auto" (Cauchy at the estimated noise
 ///     level, 1/3 of the threshold), "squared" (fastest: exact per-plane statistics), "huber" or
 ///     "cauchy" with loss_scale in metres.
+/// time_budget_s: wall-clock limit in seconds; past it CalibrationError ("time budget ...
+///     exhausted during <stage>") instead of running on. None: no limit.
 /// Raises CalibrationError with the reason when no trustworthy result exists.
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, seed=0, up=None, refine=true, loss="auto", loss_scale=None, min_inliers=50, max_iterations=100))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, seed=0, up=None, refine=true, loss="auto", loss_scale=None, min_inliers=50, max_iterations=100, time_budget_s=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_planes(
     py: Python<'_>,
@@ -546,7 +548,9 @@ fn calibrate_planes(
     loss_scale: Option<f64>,
     min_inliers: usize,
     max_iterations: usize,
+    time_budget_s: Option<f64>,
 ) -> PyResult<CalibrationResult> {
+    let time_budget = crate::budget::budget_from_secs(time_budget_s)?;
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;
     let needs_scale = |name: &str| {
@@ -580,6 +584,7 @@ fn calibrate_planes(
             max_iterations,
             ..PlanarOptions::default().lm
         },
+        time_budget,
     };
     let inner = run(py, move || {
         rs_calibrate_planes(&reference, &target, &options)
@@ -598,9 +603,10 @@ fn calibrate_planes(
 /// pole_radius: metres, or None to estimate it per pole. axis_fit: "cylinder" (default) or "line"
 ///     (the seed's centroid line, biased by up to a radius; for comparison).
 /// Raises ValueError for malformed input and CalibrationError with the reason (no bright points,
-/// fewer than two poles, parallel poles, indistinguishable hypotheses).
+/// fewer than two poles, parallel poles, indistinguishable hypotheses). time_budget_s: as for
+/// calibrate_planes (a huge cluster_tolerance on a dense cloud makes the clustering quadratic).
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit="cylinder", cluster_tolerance=0.5, min_points=15, max_iterations=100))]
+#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit="cylinder", cluster_tolerance=0.5, min_points=15, max_iterations=100, time_budget_s=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_poles(
     py: Python<'_>,
@@ -614,7 +620,9 @@ fn calibrate_poles(
     cluster_tolerance: f64,
     min_points: usize,
     max_iterations: usize,
+    time_budget_s: Option<f64>,
 ) -> PyResult<CalibrationResult> {
+    let time_budget = crate::budget::budget_from_secs(time_budget_s)?;
     let (reference, ref_intensity) = arrays::points_with_intensity(reference, "reference")?;
     let (target, tgt_intensity) = arrays::points_with_intensity(target, "target")?;
     let vendor = vendor.map(Vendor::from_name).transpose()?;
@@ -640,6 +648,7 @@ fn calibrate_poles(
             max_iterations,
             ..defaults.lm
         },
+        time_budget,
         ..defaults
     };
     let inner = run(py, move || {

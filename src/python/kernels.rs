@@ -41,7 +41,10 @@ fn kabsch<'py>(
 #[pyfunction]
 fn so3_exp<'py>(py: Python<'py>, phi: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let phi = arrays::vector3(phi, "phi")?;
-    to_numpy(py, Ix2(3, 3), row_major(geometry::so3_exp(&phi).matrix()))
+    let m = run(py, move || {
+        finite_result("phi", phi.norm(), geometry::so3_exp(&phi).matrix())
+    })?;
+    to_numpy(py, Ix2(3, 3), m)
 }
 
 /// so3_log(rotation) -> (3,) rotation vector with norm in [0, pi].
@@ -52,19 +55,21 @@ fn so3_log<'py>(
     py: Python<'py>,
     rotation: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let r = geometry::rotation_from_matrix(&arrays::matrix3(rotation, "rotation")?)?;
-    to_numpy(py, Ix1(3), geometry::so3_log(&r).as_slice().to_vec())
+    let m = arrays::matrix3(rotation, "rotation")?;
+    let phi = run(py, move || {
+        geometry::rotation_from_matrix(&m).map(|r| geometry::so3_log(&r).as_slice().to_vec())
+    })?;
+    to_numpy(py, Ix1(3), phi)
 }
 
 /// se3_exp(xi) -> (4, 4) transform of the twist xi = [rho, phi] (translation part first).
 #[pyfunction]
 fn se3_exp<'py>(py: Python<'py>, xi: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let xi = arrays::vector6(xi, "xi")?;
-    to_numpy(
-        py,
-        Ix2(4, 4),
-        row_major(&geometry::se3_exp(&xi).to_homogeneous()),
-    )
+    let m = run(py, move || {
+        finite_result("xi", xi.norm(), &geometry::se3_exp(&xi).to_homogeneous())
+    })?;
+    to_numpy(py, Ix2(4, 4), m)
 }
 
 /// se3_log(transform) -> (6,) twist [rho, phi] with |phi| in [0, pi].
@@ -74,7 +79,33 @@ fn se3_log<'py>(
     transform: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let pose = transform_arg(transform, "transform")?;
-    to_numpy(py, Ix1(6), geometry::se3_log(&pose).as_slice().to_vec())
+    let xi = run(py, move || {
+        finite_result(
+            "transform",
+            pose.translation.vector.norm(),
+            &geometry::se3_log(&pose),
+        )
+        .map(|v| v.as_slice().to_vec())
+    })?;
+    to_numpy(py, Ix1(6), xi)
+}
+
+/// The row-major values of `m`, or a `ValueError` naming `what` when they are not finite: the
+/// exponential of a vector of norm beyond ~1e154 overflows (its square is infinite), and so can
+/// the logarithm of a transform with a translation near `f64::MAX`.
+fn finite_result<R: nalgebra::Dim, C: nalgebra::Dim, S: nalgebra::RawStorage<f64, R, C>>(
+    what: &str,
+    norm: f64,
+    m: &nalgebra::Matrix<f64, R, C, S>,
+) -> crate::Result<Vec<f64>> {
+    let values = row_major(m);
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(values)
+    } else {
+        Err(crate::Error::InvalidInput(format!(
+            "{what} (norm {norm:e}) is too large: the result is not finite"
+        )))
+    }
 }
 
 fn transform_arg(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Isometry3<f64>> {

@@ -4,7 +4,7 @@ use nalgebra::Point3;
 
 use super::sampler::draw_batch;
 use super::{inliers, rms, Cloud, Estimator, RansacOptions, RansacResult};
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 
 /// Most points the hypothesis search (scoring, local optimisation, adaptive stopping) runs on.
 /// Larger clouds are searched on a fixed-stride subset: the inlier ratio, and so the ranking of
@@ -138,7 +138,7 @@ pub fn ransac<E: Estimator>(
             E::NAME
         )));
     }
-    ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+    crate::error::ensure_points("points", points.iter())?;
     // The search runs on at most MAX_SEARCH_POINTS points (a fixed stride through the cloud); the
     // final support and least-squares refit use every point.
     let stride = n.div_ceil(MAX_SEARCH_POINTS).max(1);
@@ -159,6 +159,9 @@ pub fn ransac<E: Estimator>(
     let (mut drawn, mut scored, mut point_tests) = (0usize, 0usize, 0u64);
     let mut batch = 0u64;
     while drawn < required {
+        if let Some(deadline) = &options.deadline {
+            deadline.check(&format!("RANSAC ({} search)", E::NAME))?;
+        }
         let len = BATCH.min(options.max_iterations - drawn);
         let samples = draw_batch(options.seed, batch, len, s, n_search);
         batch += 1;

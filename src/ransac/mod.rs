@@ -15,8 +15,9 @@
 //!
 //! The search runs on at most [`consensus::MAX_SEARCH_POINTS`] points (a fixed stride through a
 //! larger cloud, which keeps its inlier ratio); the returned model is refitted on, and its inliers
-//! counted over, every point. Scoring runs on a structure-of-arrays copy of the searched points in `f32`, centred on its bounding-box
-//! midpoint so that `f32` keeps sub-millimetre resolution far from the sensor; fits use the
+//! counted over, every point. Scoring runs on a structure-of-arrays copy of the searched points in `f32`, centred on the per-axis median of
+//! a sample ([`robust_center`]) so that `f32` keeps sub-millimetre resolution far from the sensor
+//! and beyond a few wild points; fits use the
 //! original `f64` points. The MSAC cost of a model is `sum_i min(d_i^2, t^2)` (truncated quadratic)
 //! with `d_i` the point's distance and `t` the threshold; inliers are the points with `d_i < t`.
 //!
@@ -46,7 +47,7 @@ pub mod sampler;
 
 use nalgebra::{Point3, Vector3};
 
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 
 pub use consensus::{ransac, Score};
 
@@ -63,6 +64,8 @@ pub struct RansacOptions {
     pub local_optimization_rounds: usize,
     /// Seed of the sampler.
     pub seed: u64,
+    /// Stop with an error once this deadline passes (checked between batches of hypotheses).
+    pub deadline: Option<crate::budget::Deadline>,
 }
 
 impl RansacOptions {
@@ -75,6 +78,7 @@ impl RansacOptions {
             max_iterations: 10_000,
             local_optimization_rounds: 3,
             seed: 0,
+            deadline: None,
         }
     }
 
@@ -133,8 +137,8 @@ pub struct Cloud<'a> {
 impl<'a> Cloud<'a> {
     /// Prepares `points` (checked finite) for scoring.
     pub fn new(points: &'a [Point3<f64>]) -> Result<Self> {
-        ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
-        let center = bounding_box_center(points);
+        crate::error::ensure_points("points", points.iter())?;
+        let center = robust_center(points);
         let mut x = Vec::with_capacity(points.len());
         let mut y = Vec::with_capacity(points.len());
         let mut z = Vec::with_capacity(points.len());
@@ -168,7 +172,7 @@ impl<'a> Cloud<'a> {
         self.points.is_empty()
     }
 
-    /// The centre subtracted before the `f32` conversion (the bounding-box midpoint).
+    /// The centre subtracted before the `f32` conversion ([`robust_center`]).
     pub fn center(&self) -> Vector3<f64> {
         self.center
     }
@@ -177,6 +181,30 @@ impl<'a> Cloud<'a> {
     pub fn soa(&self) -> (&[f32], &[f32], &[f32]) {
         (&self.x, &self.y, &self.z)
     }
+}
+
+/// Points (at most, a fixed stride through the cloud) whose per-axis median centres the `f32`
+/// scoring copy.
+pub const CENTER_SAMPLE: usize = 4096;
+
+/// The per-axis median of a strided sample of at most [`CENTER_SAMPLE`] points: the centre of the
+/// `f32` scoring copy. Unlike the bounding-box midpoint it stays among the bulk of the points when
+/// a few are wildly far (a single return at 1e9 m once moved the midpoint so far that `f32` lost
+/// every centimetre and no plane was found). Deterministic: no dependence on threads or order of
+/// evaluation.
+pub fn robust_center(points: &[Point3<f64>]) -> Vector3<f64> {
+    if points.is_empty() {
+        return Vector3::zeros();
+    }
+    let stride = points.len().div_ceil(CENTER_SAMPLE).max(1);
+    let mut center = Vector3::zeros();
+    for axis in 0..3 {
+        let mut values: Vec<f64> = points.iter().step_by(stride).map(|p| p[axis]).collect();
+        let mid = values.len() / 2;
+        let (_, median, _) = values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        center[axis] = *median;
+    }
+    center
 }
 
 /// Midpoint of the axis-aligned bounding box (exactly reproducible, unlike a mean).

@@ -13,7 +13,7 @@ use nalgebra::Point3;
 use super::consensus::{ransac, Score, GROUP};
 use super::kernel;
 use super::{Cloud, Estimator, RansacOptions, RansacResult};
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 use crate::fit::Moments;
 use crate::geometry::Plane;
 
@@ -212,7 +212,7 @@ pub fn extract_planes(
     options: &ExtractOptions,
 ) -> Result<Vec<ExtractedPlane>> {
     options.ransac.validate()?;
-    ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+    crate::error::ensure_points("points", points.iter())?;
     if options.count == 0 {
         return Err(Error::InvalidInput("count must be at least 1".into()));
     }
