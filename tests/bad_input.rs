@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use lidarcal::calib::planes::{calibrate_planes, PlanarOptions};
 use lidarcal::calib::poles::{calibrate_poles, PoleOptions};
+use lidarcal::io::pcd::PcdFormat;
 use lidarcal::kabsch::kabsch;
 use lidarcal::sim::scenes::{corner_scene, poles_scene, CornerOptions, PolesOptions};
 use lidarcal::sim::BeamModel;
@@ -155,12 +156,28 @@ fn writers_refuse_what_they_cannot_store() {
     let dir = std::env::temp_dir().join(format!("lidarcal-bad-input-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let names: Vec<String> = ["x", "y", "z"].iter().map(|s| s.to_string()).collect();
-    let e = lidarcal::io::write_points(&dir.join("a.ply"), &names, &[1e300, 0.0, 0.0]);
+    let e = lidarcal::io::write_points(
+        &dir.join("a.ply"),
+        &names,
+        &[1e300, 0.0, 0.0],
+        PcdFormat::Binary,
+    );
     assert_variant(&e.unwrap_err(), true, "does not fit the float32");
     let dup: Vec<String> = ["x", "y", "x"].iter().map(|s| s.to_string()).collect();
-    let e = lidarcal::io::write_points(&dir.join("a.pcd"), &dup, &[1.0, 2.0, 3.0]);
+    let e = lidarcal::io::write_points(
+        &dir.join("a.pcd"),
+        &dup,
+        &[1.0, 2.0, 3.0],
+        PcdFormat::Binary,
+    );
     assert_variant(&e.unwrap_err(), true, "appears twice");
     // float64 .npy keeps such values.
-    lidarcal::io::write_points(&dir.join("a.npy"), &names, &[1e300, 0.0, 0.0]).unwrap();
+    lidarcal::io::write_points(
+        &dir.join("a.npy"),
+        &names,
+        &[1e300, 0.0, 0.0],
+        PcdFormat::Binary,
+    )
+    .unwrap();
     std::fs::remove_dir_all(&dir).ok();
 }
