@@ -510,6 +510,12 @@ def calibrate(
                 target_frame=target.frame,
             )
             entries.append(entry)
+            if entry["diagnostics"].get("ambiguous"):
+                click.echo(
+                    f"Warning: {target.text}: another hypothesis fits almost as well "
+                    "(diagnostics.ambiguous); check the plot before trusting this result",
+                    err=True,
+                )
             if plot is not None:
                 png = plot
                 if len(targets) > 1:

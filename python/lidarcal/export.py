@@ -154,6 +154,21 @@ def to_dict(
             hypothesis_margin=result.hypothesis_margin,
             ambiguous=result.ambiguous,
         )
+    elif result.method == "targetless":
+        weakest = result.weakest_translation
+        diagnostics.update(
+            planes_reference=_list(result.planes_reference),
+            planes_target=_list(result.planes_target),
+            matched_planes=result.matched_planes,
+            plane_counts=_list(result.plane_counts),
+            hypothesis_counts=_list(result.hypothesis_counts),
+            best_score=result.best_score,
+            second_score=result.second_score,
+            triplet=result.triplet,
+            weakest_translation_direction=None if weakest is None else _list(weakest[0]),
+            weakest_translation_share=None if weakest is None else float(weakest[1]),
+            icp_fitness=result.icp_fitness,
+        )
     out["diagnostics"] = diagnostics
     return out
 

@@ -345,6 +345,12 @@ fn isometry(rotation: &nalgebra::Rotation3<f64>, t: Vector3<f64>) -> Isometry3<f
     )
 }
 
+/// A cloud whose nearest point is farther than this from the origin is taken not to be in its
+/// sensor's frame: every LiDAR sees something (the ground, its mount) within tens of metres, and
+/// the planes' normals are oriented toward the origin as the sensor, so a far origin flips them
+/// and can turn a calibration by 180 degrees while every check still passes.
+pub const MAX_NEAREST_RANGE: f64 = 50.0;
+
 fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
     if points.len() < 9 {
         return Err(Error::InvalidInput(format!(
@@ -352,7 +358,19 @@ fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
             points.len()
         )));
     }
-    crate::error::ensure_points(which, points.iter())
+    crate::error::ensure_points(which, points.iter())?;
+    let nearest = points
+        .iter()
+        .map(|p| p.coords.norm())
+        .fold(f64::INFINITY, f64::min);
+    if nearest > MAX_NEAREST_RANGE {
+        return Err(Error::InvalidInput(format!(
+            "the {which} cloud's nearest point is {nearest:.1} m from the origin: each cloud must \
+             be in its own sensor's frame (origin at the sensor), which a LiDAR never sees only \
+             beyond {MAX_NEAREST_RANGE} m"
+        )));
+    }
+    Ok(())
 }
 
 /// Matches the planes and returns the chosen cyclic shift with its rotation.
@@ -604,6 +622,21 @@ pub fn calibrate_planes(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cloud_far_from_its_origin_is_refused() {
+        let near: Vec<Point3<f64>> = (0..20).map(|i| Point3::new(i as f64, 1.0, -1.5)).collect();
+        assert!(check_cloud(&near, "reference").is_ok());
+        let shifted: Vec<Point3<f64>> = near
+            .iter()
+            .map(|p| p + Vector3::new(100.0, 0.0, 0.0))
+            .collect();
+        let err = check_cloud(&shifted, "reference").unwrap_err().to_string();
+        assert!(
+            err.contains("nearest point is 100.0 m") && err.contains("own sensor's frame"),
+            "{err}"
+        );
+    }
 
     #[test]
     fn irls_reaches_the_robust_lm_estimate() {

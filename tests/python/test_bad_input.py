@@ -239,6 +239,12 @@ CASES: list[Case] = [
         "got NaN",
     ),
     Case(
+        "planes: reference not in its sensor's frame (shifted 100 m)",
+        planes(lambda: corner()[0] + [100.0, 0.0, 0.0]),
+        ValueError,
+        "must be in its own sensor's frame",
+    ),
+    Case(
         "planes: threshold 100 m",
         planes(lambda: corner()[0], distance_threshold=100.0),
         CE,

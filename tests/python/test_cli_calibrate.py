@@ -348,3 +348,32 @@ def test_read_bag_by_topic_and_time(tmp_path: Path, ros1: bool) -> None:
     bad.write_bytes(b"not a bag")
     with pytest.raises(lidarcal.FileFormatError, match="not a readable ROS bag"):
         read_bag(bad, "/points")
+
+
+def test_auto_on_a_street_reports_targetless(tmp_path: Path) -> None:
+    scene = sim.street_scene(seed=0, side="left")
+    lidarcal.write_points(tmp_path / "top.pcd", scene.reference)
+    lidarcal.write_points(tmp_path / "left.pcd", scene.target)
+    out = tmp_path / "street.yaml"
+    res = CliRunner().invoke(
+        main,
+        [
+            "calibrate",
+            str(tmp_path / "top.pcd"),
+            str(tmp_path / "left.pcd"),
+            "--output",
+            str(out),
+            "--json",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    printed = json.loads(res.stdout)
+    assert printed["method"] == "targetless"
+    diagnostics = printed["diagnostics"]
+    assert diagnostics["matched_planes"] >= 3
+    assert diagnostics["best_score"] >= diagnostics["second_score"]
+    assert len(diagnostics["weakest_translation_direction"]) == 3
+    t = np.array(printed["transform"])
+    assert rotation_error_deg(scene.reference_from_target, t) < 0.1
+    assert np.linalg.norm(scene.reference_from_target[:3, 3] - t[:3, 3]) < 0.03
+    assert yaml.safe_load(out.read_text()) == printed
