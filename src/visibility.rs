@@ -111,8 +111,10 @@ impl RangeImage {
         Some(r < near - VIOLATION_MARGIN - VIOLATION_RELATIVE_MARGIN * near)
     }
 
-    /// The number of `points` (another scan's, in its own frame) that violate this scan's free
-    /// space once mapped by `this_from_points`.
+    /// The number of `points` (another scan's, in its own sensor's frame) that violate this
+    /// scan's free space once mapped by `this_from_points`. Points within
+    /// [`MIN_VISIBILITY_RANGE`] of their own sensor are left out as well: they are mostly the
+    /// vehicle both sensors ride on, which the other sensor's blind zone hides.
     pub fn count_violations(
         &self,
         points: &[Point3<f64>],
@@ -120,6 +122,7 @@ impl RangeImage {
     ) -> usize {
         points
             .iter()
+            .filter(|p| p.coords.norm() >= MIN_VISIBILITY_RANGE)
             .filter(|p| self.violation(&(this_from_points * *p)) == Some(true))
             .count()
     }

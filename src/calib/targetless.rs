@@ -111,7 +111,14 @@ pub const VIOLATION_WEIGHT: f64 = 3.0;
 /// plane of each cloud onto the other's and turn about its normal.
 pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
 /// Largest planes of the target tried as the reference's largest plane in the ground sweep.
-pub const SWEEP_TARGET_PLANES: usize = 2;
+pub const SWEEP_TARGET_PLANES: usize = 1;
+/// Target points (at most, by a fixed stride) scored in the screening of every hypothesis.
+pub const SCREEN_SAMPLES: usize = 300;
+/// Reference points (at most, by a fixed stride) checked against the target's free space in the
+/// screening.
+pub const SCREEN_REFERENCE_SAMPLES: usize = 700;
+/// Distinct hypotheses (best screening scores) that go on to the full verification.
+pub const SCREEN_KEEP: usize = 12;
 /// The result is ambiguous when a distinct pose scores at least this share of the best.
 pub const AMBIGUITY_RATIO: f64 = 0.8;
 /// Bounds of the inlier threshold taken from the noise estimate (metres). Road scenes are not
@@ -139,6 +146,9 @@ pub const MERGE_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 pub const MERGE_OFFSET: f64 = 0.3;
 /// RANSAC hypotheses per sequentially extracted plane.
 pub const PLANE_RANSAC_ITERATIONS: usize = 1000;
+/// Points (at most, by a fixed stride) each sequential RANSAC run samples and scores; the
+/// inliers are then collected from all remaining points.
+pub const SEQUENTIAL_SAMPLES: usize = 15_000;
 /// Smallest extent of a plane along its second in-plane axis (metres).
 pub const MIN_PLANE_WIDTH: f64 = 1.0;
 
@@ -354,13 +364,14 @@ fn prepare(points: &[Point3<f64>], options: &TargetlessOptions) -> Result<Prepar
         },
     };
     let mut features = segment_planes(&ds, threshold, options.max_planes, options.min_inliers)?;
-    features.extend(sequential_planes(
+    let seq = sequential_planes(
         &ds,
         threshold,
         2 * options.max_planes,
         options.min_inliers,
         options.seed,
-    )?);
+    )?;
+    features.extend(seq);
     let features = distinct(features, 2 * options.max_planes);
     Ok(Prepared {
         points: ds,
@@ -566,7 +577,14 @@ fn sequential_planes(
         if remaining.len() < min_inliers.max(3) {
             break;
         }
-        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
+        // RANSAC runs on an even subsample of a large cloud; the inliers are then taken from
+        // all remaining points.
+        let stride = remaining.len().div_ceil(SEQUENTIAL_SAMPLES).max(1);
+        let subset: Vec<Point3<f64>> = remaining
+            .iter()
+            .step_by(stride)
+            .filter_map(|&i| points.get(i).copied())
+            .collect();
         let mut options = RansacOptions::new(threshold);
         options.seed = seed.wrapping_add((run as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         options.max_iterations = PLANE_RANSAC_ITERATIONS;
@@ -575,10 +593,18 @@ fn sequential_planes(
             Err(Error::Degenerate(_)) => break,
             Err(e) => return Err(e),
         };
-        if found.inliers.len() < min_inliers {
+        let voxels: Vec<usize> = remaining
+            .iter()
+            .copied()
+            .filter(|&i| {
+                points
+                    .get(i)
+                    .is_some_and(|p| found.model.signed_distance(p).abs() < threshold)
+            })
+            .collect();
+        if voxels.len() < min_inliers {
             break;
         }
-        let voxels: Vec<usize> = found.inliers.iter().map(|&i| remaining[i]).collect();
         for &i in &voxels {
             taken[i] = true;
         }
@@ -870,24 +896,24 @@ fn ground_sweep(reference: &[PlaneFeature], target: &[PlaneFeature]) -> Vec<Cand
     out
 }
 
-/// Options of the short ICP that polishes each ground-sweep hypothesis: a wider first
-/// correspondence distance, since the start is up to half a step of yaw and the in-plane
-/// translation away.
-fn sweep_icp_options() -> IcpOptions {
+/// Options of the quick ICP of the screening (the first stage of the verification), for a
+/// plane-pair hypothesis or a ground-sweep one (wider first distance: the start is up to half a
+/// step of yaw and the in-plane translation away).
+fn screen_icp_options(sweep: bool) -> IcpOptions {
     IcpOptions {
-        max_distance: 2.0,
-        min_distance: 0.3,
+        max_distance: if sweep { 2.0 } else { 1.0 },
+        min_distance: 0.5,
         shrink: 0.7,
-        max_iterations: 9,
-        samples: 400,
+        max_iterations: if sweep { 7 } else { 3 },
+        samples: 300,
         step_tolerance: 1e-4,
     }
 }
 
-/// Options of the short ICP that polishes each verified hypothesis.
+/// Options of the short ICP that continues from the screened pose of each verified hypothesis.
 fn verify_icp_options() -> IcpOptions {
     IcpOptions {
-        max_distance: 1.0,
+        max_distance: 0.5,
         min_distance: 0.3,
         shrink: 0.7,
         max_iterations: 6,
@@ -981,31 +1007,31 @@ pub fn calibrate_targetless(
     let target_image = RangeImage::new(&target_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
     clock.lap("normals");
 
-    // Verification: short ICP from each hypothesis, then point agreement and free space.
-    let stride = target_ds.points.len().div_ceil(VERIFY_SAMPLES).max(1);
-    let verify_points: Vec<Point3<f64>> =
-        target_ds.points.iter().step_by(stride).copied().collect();
-    let stride = reference_ds
-        .points
-        .len()
-        .div_ceil(VERIFY_REFERENCE_SAMPLES)
-        .max(1);
-    let reference_points: Vec<Point3<f64>> = reference_ds
-        .points
-        .iter()
-        .step_by(stride)
-        .copied()
-        .collect();
-    let score = |pose: Isometry3<f64>| -> Verified {
-        let agreement = surface.overlap(&mapped(&verify_points, &pose), VERIFY_DISTANCE);
+    // Verification in two stages: a quick ICP and score for every hypothesis (screening), then
+    // a longer ICP and the full score for the best few distinct ones.
+    let sample = |points: &[Point3<f64>], count: usize| -> Vec<Point3<f64>> {
+        let stride = points.len().div_ceil(count).max(1);
+        points.iter().step_by(stride).copied().collect()
+    };
+    let full = [
+        sample(&target_ds.points, VERIFY_SAMPLES),
+        sample(&reference_ds.points, VERIFY_REFERENCE_SAMPLES),
+    ];
+    let quick = [
+        sample(&target_ds.points, SCREEN_SAMPLES),
+        sample(&reference_ds.points, SCREEN_REFERENCE_SAMPLES),
+    ];
+    let score = |pose: Isometry3<f64>,
+                 [target_points, reference_points]: &[Vec<Point3<f64>>; 2]| {
+        let agreement = surface.overlap(&mapped(target_points, &pose), VERIFY_DISTANCE);
         let share = |count: usize, total: usize| count as f64 / total.max(1) as f64;
         let violations = [
             share(
-                reference_image.count_violations(&verify_points, &pose),
-                verify_points.len(),
+                reference_image.count_violations(target_points, &pose),
+                target_points.len(),
             ),
             share(
-                target_image.count_violations(&reference_points, &pose.inverse()),
+                target_image.count_violations(reference_points, &pose.inverse()),
                 reference_points.len(),
             ),
         ];
@@ -1016,12 +1042,10 @@ pub fn calibrate_targetless(
             score: agreement - VIOLATION_WEIGHT * (violations[0] + violations[1]),
         }
     };
-    let (short, wide) = (verify_icp_options(), sweep_icp_options());
-    let verify_one = |c: &Candidate| -> Option<Verified> {
-        let icp_options = if c.sweep { &wide } else { &short };
-        point_to_plane_icp(&surface, &target_ds.points, &c.pose, icp_options)
+    let icp_then_score = |start: &Isometry3<f64>, icp: &IcpOptions, samples| {
+        point_to_plane_icp(&surface, &target_ds.points, start, icp)
             .ok()
-            .map(|r| score(r.pose))
+            .map(|r| score(r.pose, samples))
     };
     let chosen: Vec<Candidate> = candidates
         .iter()
@@ -1029,20 +1053,55 @@ pub fn calibrate_targetless(
         .chain(sweep.iter())
         .copied()
         .collect();
+    let (screen_pair, screen_sweep, short) = (
+        screen_icp_options(false),
+        screen_icp_options(true),
+        verify_icp_options(),
+    );
+    let screen_one = |c: &Candidate| {
+        let icp = if c.sweep { &screen_sweep } else { &screen_pair };
+        icp_then_score(&c.pose, icp, &quick)
+    };
+    #[cfg(feature = "parallel")]
+    let screened: Vec<Option<Verified>> = {
+        use rayon::prelude::*;
+        chosen.par_iter().map(screen_one).collect()
+    };
+    #[cfg(not(feature = "parallel"))]
+    let screened: Vec<Option<Verified>> = chosen.iter().map(screen_one).collect();
+    let mut kept: Vec<(usize, Isometry3<f64>)> = Vec::new();
+    for (k, _) in rank(&screened) {
+        if kept.len() >= SCREEN_KEEP {
+            break;
+        }
+        let Some(Some(v)) = screened.get(k) else {
+            continue;
+        };
+        if !kept
+            .iter()
+            .any(|(_, p)| same_pose(p, &v.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+        {
+            kept.push((k, v.pose));
+        }
+    }
+    let verify_one = |(_, pose): &(usize, Isometry3<f64>)| icp_then_score(pose, &short, &full);
     #[cfg(feature = "parallel")]
     let verified: Vec<Option<Verified>> = {
         use rayon::prelude::*;
-        chosen.par_iter().map(verify_one).collect()
+        kept.par_iter().map(verify_one).collect()
     };
     #[cfg(not(feature = "parallel"))]
-    let verified: Vec<Option<Verified>> = chosen.iter().map(verify_one).collect();
+    let verified: Vec<Option<Verified>> = kept.iter().map(verify_one).collect();
     let ranked = rank(&verified);
     let Some(&(best, _)) = ranked.first() else {
         return Err(Error::Calibration(
             "no plane hypothesis brings the clouds into agreement (ICP found no overlap)".into(),
         ));
     };
-    let (Some(Some(mut top)), Some(&winner)) = (verified.get(best), chosen.get(best)) else {
+    let (Some(Some(mut top)), Some(&winner)) = (
+        verified.get(best),
+        kept.get(best).and_then(|(k, _)| chosen.get(*k)),
+    ) else {
         return Err(Error::Numerical(
             "verification lost its best hypothesis".into(),
         ));
@@ -1057,7 +1116,7 @@ pub fn calibrate_targetless(
         let polish = |v: &Verified| {
             point_to_plane_icp(&surface, &target_ds.points, &v.pose, &options.icp_options)
                 .ok()
-                .map(|r| score(r.pose))
+                .map(|r| score(r.pose, &full))
         };
         let (a, b) = (polish(&top), polish(&second));
         match (a, b) {
@@ -1092,16 +1151,18 @@ pub fn calibrate_targetless(
     }
     let second_score = runner_up.map_or(0.0, |r| r.score.max(0.0));
     let ambiguous = second_score >= AMBIGUITY_RATIO * best_score;
-    if ambiguous && options.refuse_ambiguous {
+    // Refused after the observability check below, whose reason is the more fundamental one
+    // (a corridor is ambiguous along its axis because nothing constrains that direction).
+    let ambiguity = (ambiguous && options.refuse_ambiguous).then(|| {
         let (angle, distance) = runner_up.map_or((0.0, 0.0), |r| pose_error(&r.pose, &polished));
-        return Err(Error::Calibration(format!(
+        format!(
             "ambiguous: two poses {:.1} deg and {:.2} m apart verify almost equally well \
              (scores {best_score:.3} and {second_score:.3}; a symmetric scene such as a straight \
              street seen from its middle); add structure that breaks the symmetry",
             angle.to_degrees(),
             distance
-        )));
-    }
+        )
+    });
     clock.lap("verify");
 
     // Plane refinement on every matched plane.
@@ -1213,6 +1274,10 @@ pub fn calibrate_targetless(
         )));
     }
 
+    if let Some(message) = ambiguity {
+        return Err(Error::Calibration(message));
+    }
+
     // Matched planes, their input indices and residuals at the result.
     let expand = |prepared: &Prepared, f: &PlaneFeature| -> Vec<usize> {
         let mut inlier_voxel = vec![false; prepared.points.len()];
@@ -1259,7 +1324,7 @@ pub fn calibrate_targetless(
             .collect(),
         rmse,
         hypotheses: [enumerated, candidates.len()],
-        verified: verified.len(),
+        verified: chosen.len(),
         triplet: !winner.sweep && winner.free.is_none(),
         sweep: winner.sweep,
         best_score,
