@@ -19,14 +19,21 @@
 //!    **triplet** hypothesis, solved by least squares on the three planes. Without one (a street
 //!    of ground and facades) the third component is left at the minimum-norm value (sensors of
 //!    one rig are close together) and is settled by ICP in step 5.
-//! 4. **Verification.** Hypotheses are deduplicated (1 degree, 10 cm) and ranked by the planes
-//!    they bring into agreement (a target plane agrees with a reference plane when their normals
-//!    are within the tolerance and, where the hypothesis fixes it, their offsets within
+//!    **Ground sweep** ([`TargetlessOptions::ground_sweep`]): the largest plane of each cloud (the
+//!    road) levelled onto the other's and turned about its normal in [`SWEEP_STEP`] steps, the
+//!    in-plane translation left to ICP; this covers scenes that share no plane pair.
+//! 4. **Verification.** Pair hypotheses are deduplicated (1 degree, 10 cm) and ranked by the
+//!    planes they bring into agreement (a target plane agrees with a reference plane when their
+//!    normals are within the tolerance and, where the hypothesis fixes it, their offsets within
 //!    [`TargetlessOptions::offset_tolerance`]), weighted by inliers. The best
-//!    [`TargetlessOptions::max_verified`] are each polished by a short ICP and scored by the
-//!    fraction of target points that land within [`VERIFY_DISTANCE`] of a reference point. The
-//!    highest score wins; the best score of a hypothesis ending at a different pose (more than 2
-//!    degrees or 30 cm away) is reported as the second best.
+//!    [`TargetlessOptions::max_verified`] and the sweep hypotheses are screened (a quick ICP and
+//!    score), and the best [`SCREEN_KEEP`] distinct ones get a longer ICP and the full score: the
+//!    share of target points within [`VERIFY_DISTANCE`] of a reference point minus
+//!    [`VIOLATION_WEIGHT`] times the free-space violations both ways ([`crate::visibility`]:
+//!    points that land in space the other sensor saw through). Point agreement alone prefers the
+//!    180-degree turn of some streets; the violations reject it. The best score of a pose more
+//!    than 2 degrees or 30 cm away is the second best; when it reaches [`AMBIGUITY_RATIO`] of the
+//!    best after both are polished, the result is refused as ambiguous (or flagged).
 //! 5. **Refinement.** Every target plane that agrees with a reference plane at the winning pose is
 //!    matched; Levenberg–Marquardt minimises the symmetric point-to-plane cost over all matched
 //!    planes (exact per-plane sufficient statistics, [`PlaneMomentsProblem`]). Then, unless
