@@ -232,7 +232,8 @@ impl CalibrationResult {
     /// of the checked points, at the best hypothesis (targetless only).
     #[getter]
     fn violations(&self) -> Option<(f64, f64)> {
-        self.targetless().map(|t| (t.violations[0], t.violations[1]))
+        self.targetless()
+            .map(|t| (t.violations[0], t.violations[1]))
     }
     /// Whether the winning hypothesis came from the ground sweep (targetless only).
     #[getter]
