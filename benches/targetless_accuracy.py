@@ -34,7 +34,7 @@ def run(reference: np.ndarray, target: np.ndarray) -> tuple[np.ndarray | None, s
         r = lidarcal.calibrate_targetless(reference, target)
         note = (
             f"planes={r.matched_planes} best={r.best_score:.3f} second={r.second_score:.3f} "
-            f"weakest={r.weakest_translation[1]:.3f}"  # type: ignore[index]
+            f"weakest={r.weakest_translation[1]:.3f} {r.timings['total']:.0f}ms"  # type: ignore[index]
         )
         return r.transform, note, time.perf_counter() - t0
     except lidarcal.CalibrationError as e:

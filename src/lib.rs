@@ -14,6 +14,9 @@
 //! * [`fit`]: plane, line and cylinder fits ([`fit::cylinder::fit_cylinder`] recovers a pole's axis).
 //! * [`sim`]: a scan simulator (VLP-16, HDL-32E, HDL-64E, OS1-128; walls, boxes, taped poles) with
 //!   ground-truth scenes.
+//! * [`icp`]: voxel downsampling, surface normals and robust point-to-plane ICP.
+//! * [`visibility`]: free-space consistency of two scans (range images), which tells a wrong pose
+//!   from the truth when point agreement cannot.
 //! * `io` (feature `io`): a PCD writer.
 //!
 //! ## Features
@@ -73,6 +76,7 @@ pub mod metrics;
 pub mod ransac;
 pub mod residuals;
 pub mod sim;
+pub mod visibility;
 
 #[cfg(feature = "io")]
 pub mod io;

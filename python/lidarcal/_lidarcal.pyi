@@ -157,6 +157,13 @@ class CalibrationResult:
     @property
     def second_score(self) -> float | None: ...
     @property
+    def agreement(self) -> float | None: ...
+    @property
+    def violations(self) -> tuple[float, float] | None:
+        """(target points in the reference's free space, reference points in the target's)."""
+    @property
+    def sweep(self) -> bool | None: ...
+    @property
     def triplet(self) -> bool | None: ...
     @property
     def weakest_translation(self) -> tuple[F64Array, float] | None:
@@ -174,6 +181,8 @@ def calibrate_targetless(
     max_translation: float = 5.0,
     icp: bool = True,
     min_information_share: float = 0.01,
+    ground_sweep: bool = True,
+    refuse_ambiguous: bool = True,
     seed: int = 0,
 ) -> CalibrationResult: ...
 def overlap(

@@ -19,14 +19,21 @@
 //!    **triplet** hypothesis, solved by least squares on the three planes. Without one (a street
 //!    of ground and facades) the third component is left at the minimum-norm value (sensors of
 //!    one rig are close together) and is settled by ICP in step 5.
-//! 4. **Verification.** Hypotheses are deduplicated (1 degree, 10 cm) and ranked by the planes
-//!    they bring into agreement (a target plane agrees with a reference plane when their normals
-//!    are within the tolerance and, where the hypothesis fixes it, their offsets within
+//!    **Ground sweep** ([`TargetlessOptions::ground_sweep`]): the largest plane of each cloud (the
+//!    road) levelled onto the other's and turned about its normal in [`SWEEP_STEP`] steps, the
+//!    in-plane translation left to ICP; this covers scenes that share no plane pair.
+//! 4. **Verification.** Pair hypotheses are deduplicated (1 degree, 10 cm) and ranked by the
+//!    planes they bring into agreement (a target plane agrees with a reference plane when their
+//!    normals are within the tolerance and, where the hypothesis fixes it, their offsets within
 //!    [`TargetlessOptions::offset_tolerance`]), weighted by inliers. The best
-//!    [`TargetlessOptions::max_verified`] are each polished by a short ICP and scored by the
-//!    fraction of target points that land within [`VERIFY_DISTANCE`] of a reference point. The
-//!    highest score wins; the best score of a hypothesis ending at a different pose (more than 2
-//!    degrees or 30 cm away) is reported as the second best.
+//!    [`TargetlessOptions::max_verified`] and the sweep hypotheses are screened (a quick ICP and
+//!    score), and the best [`SCREEN_KEEP`] distinct ones get a longer ICP and the full score: the
+//!    share of target points within [`VERIFY_DISTANCE`] of a reference point minus
+//!    [`VIOLATION_WEIGHT`] times the free-space violations both ways ([`crate::visibility`]:
+//!    points that land in space the other sensor saw through). Point agreement alone prefers the
+//!    180-degree turn of some streets; the violations reject it. The best score of a pose more
+//!    than 2 degrees or 30 cm away is the second best; when it reaches [`AMBIGUITY_RATIO`] of the
+//!    best after both are polished, the result is refused as ambiguous (or flagged).
 //! 5. **Refinement.** Every target plane that agrees with a reference plane at the winning pose is
 //!    matched; Levenberg–Marquardt minimises the symmetric point-to-plane cost over all matched
 //!    planes (exact per-plane sufficient statistics, [`PlaneMomentsProblem`]). Then, unless
@@ -80,6 +87,7 @@ use crate::lm::{solve, LmOptions, LmReport};
 use crate::ransac::plane::ransac_plane;
 use crate::ransac::RansacOptions;
 use crate::residuals::{Frame, PlaneMomentGroup, PlaneMomentsProblem};
+use crate::visibility::RangeImage;
 
 /// Two planes of a hypothesis pair must be at least this far from parallel (radians, 30 degrees).
 pub const MIN_PAIR_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
@@ -100,6 +108,26 @@ pub const DISTINCT_DISTANCE: f64 = 0.3;
 pub const VERIFY_DISTANCE: f64 = 0.25;
 /// Target points (at most, by a fixed stride) scored in the verification.
 pub const VERIFY_SAMPLES: usize = 800;
+/// Reference points (at most, by a fixed stride) checked against the target's free space.
+pub const VERIFY_REFERENCE_SAMPLES: usize = 2000;
+/// Weight of the free-space violations in the verification score: `score = agreement -
+/// VIOLATION_WEIGHT (v_target + v_reference)`, each `v` the share of a cloud's checked points that
+/// fall into space the other sensor saw through ([`crate::visibility`]).
+pub const VIOLATION_WEIGHT: f64 = 3.0;
+/// Yaw step of the ground sweep (radians, 15 degrees): the hypotheses that level the largest
+/// plane of each cloud onto the other's and turn about its normal.
+pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
+/// Largest planes of the target tried as the reference's largest plane in the ground sweep.
+pub const SWEEP_TARGET_PLANES: usize = 1;
+/// Target points (at most, by a fixed stride) scored in the screening of every hypothesis.
+pub const SCREEN_SAMPLES: usize = 300;
+/// Reference points (at most, by a fixed stride) checked against the target's free space in the
+/// screening.
+pub const SCREEN_REFERENCE_SAMPLES: usize = 700;
+/// Distinct hypotheses (best screening scores) that go on to the full verification.
+pub const SCREEN_KEEP: usize = 12;
+/// The result is ambiguous when a distinct pose scores at least this share of the best.
+pub const AMBIGUITY_RATIO: f64 = 0.8;
 /// Bounds of the inlier threshold taken from the noise estimate (metres). Road scenes are not
 /// flat (camber, kerbs, pavements): when the estimate fails or exceeds the upper bound, the upper
 /// bound is used.
@@ -125,6 +153,9 @@ pub const MERGE_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 pub const MERGE_OFFSET: f64 = 0.3;
 /// RANSAC hypotheses per sequentially extracted plane.
 pub const PLANE_RANSAC_ITERATIONS: usize = 1000;
+/// Points (at most, by a fixed stride) each sequential RANSAC run samples and scores; the
+/// inliers are then collected from all remaining points.
+pub const SEQUENTIAL_SAMPLES: usize = 15_000;
 /// Smallest extent of a plane along its second in-plane axis (metres).
 pub const MIN_PLANE_WIDTH: f64 = 1.0;
 
@@ -156,6 +187,13 @@ pub struct TargetlessOptions {
     /// Smallest share of the translation (and rotation) information in its weakest direction;
     /// below it the calibration is refused as unobservable.
     pub min_information_share: f64,
+    /// Also hypothesise from the largest plane of each cloud (the ground of a road scene) turned
+    /// about its normal in steps of [`SWEEP_STEP`], each polished by ICP: this finds the pose
+    /// when the clouds share no pair of non-parallel planes.
+    pub ground_sweep: bool,
+    /// Refuse (rather than flag [`TargetlessCalibration::ambiguous`]) when a distinct pose
+    /// verifies almost as well as the best ([`AMBIGUITY_RATIO`]).
+    pub refuse_ambiguous: bool,
     /// Seed of the RANSAC sampler.
     pub seed: u64,
 }
@@ -174,6 +212,8 @@ impl Default for TargetlessOptions {
             icp: true,
             icp_options: IcpOptions::default(),
             min_information_share: 0.01,
+            ground_sweep: true,
+            refuse_ambiguous: true,
             seed: 0,
         }
     }
@@ -258,10 +298,23 @@ pub struct TargetlessCalibration {
     /// Whether the winning hypothesis came from a plane triplet (all three translation
     /// components from planes) rather than a pair.
     pub triplet: bool,
-    /// Verification score (fraction of target points agreeing) of the best hypothesis.
+    /// Whether the winning hypothesis came from the ground sweep.
+    pub sweep: bool,
+    /// Verification score of the best hypothesis: the share of target points within
+    /// [`VERIFY_DISTANCE`] of a reference point, minus [`VIOLATION_WEIGHT`] times the free-space
+    /// violations ([`TargetlessCalibration::violations`]).
     pub best_score: f64,
     /// Best verification score of a hypothesis ending at a different pose (0 when none).
     pub second_score: f64,
+    /// Share of the best hypothesis' checked target points within [`VERIFY_DISTANCE`] of a
+    /// reference point.
+    pub agreement: f64,
+    /// Free-space violations of the best hypothesis: the share of checked target points in space
+    /// the reference saw through, and of reference points in space the target saw through.
+    pub violations: [f64; 2],
+    /// `true` when a distinct pose scored at least [`AMBIGUITY_RATIO`] of the best (only
+    /// returned when [`TargetlessOptions::refuse_ambiguous`] is off).
+    pub ambiguous: bool,
     /// Inlier thresholds used for the reference and the target cloud (metres).
     pub distance_thresholds: [f64; 2],
     /// Levenberg–Marquardt report of the plane refinement.
@@ -318,13 +371,14 @@ fn prepare(points: &[Point3<f64>], options: &TargetlessOptions) -> Result<Prepar
         },
     };
     let mut features = segment_planes(&ds, threshold, options.max_planes, options.min_inliers)?;
-    features.extend(sequential_planes(
+    let seq = sequential_planes(
         &ds,
         threshold,
         2 * options.max_planes,
         options.min_inliers,
         options.seed,
-    )?);
+    )?;
+    features.extend(seq);
     let features = distinct(features, 2 * options.max_planes);
     Ok(Prepared {
         points: ds,
@@ -530,7 +584,14 @@ fn sequential_planes(
         if remaining.len() < min_inliers.max(3) {
             break;
         }
-        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
+        // RANSAC runs on an even subsample of a large cloud; the inliers are then taken from
+        // all remaining points.
+        let stride = remaining.len().div_ceil(SEQUENTIAL_SAMPLES).max(1);
+        let subset: Vec<Point3<f64>> = remaining
+            .iter()
+            .step_by(stride)
+            .filter_map(|&i| points.get(i).copied())
+            .collect();
         let mut options = RansacOptions::new(threshold);
         options.seed = seed.wrapping_add((run as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         options.max_iterations = PLANE_RANSAC_ITERATIONS;
@@ -539,10 +600,18 @@ fn sequential_planes(
             Err(Error::Degenerate(_)) => break,
             Err(e) => return Err(e),
         };
-        if found.inliers.len() < min_inliers {
+        let voxels: Vec<usize> = remaining
+            .iter()
+            .copied()
+            .filter(|&i| {
+                points
+                    .get(i)
+                    .is_some_and(|p| found.model.signed_distance(p).abs() < threshold)
+            })
+            .collect();
+        if voxels.len() < min_inliers {
             break;
         }
-        let voxels: Vec<usize> = found.inliers.iter().map(|&i| remaining[i]).collect();
         for &i in &voxels {
             taken[i] = true;
         }
@@ -589,6 +658,8 @@ struct Candidate {
     /// Unit direction of translation no plane of the hypothesis fixes (pairs only).
     free: Option<Vector3<f64>>,
     support: f64,
+    /// From the ground sweep rather than a plane pair.
+    sweep: bool,
 }
 
 fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
@@ -736,6 +807,7 @@ fn hypotheses(
                                     pose: isometry(&r, t),
                                     free: None,
                                     support: 0.0,
+                                    sweep: false,
                                 });
                                 thirds += 1;
                             }
@@ -750,6 +822,7 @@ fn hypotheses(
                                 pose: isometry(&r, t),
                                 free,
                                 support: 0.0,
+                                sweep: false,
                             });
                         }
                         enumerated += 1;
@@ -791,16 +864,89 @@ fn hypotheses(
     (enumerated, distinct)
 }
 
-/// Options of the short ICP that polishes each verified hypothesis.
+/// The ground-sweep hypotheses (see [`TargetlessOptions::ground_sweep`]): the largest reference
+/// plane matched to each of the [`SWEEP_TARGET_PLANES`] largest target planes (normals aligned,
+/// offsets equal), turned about its normal in [`SWEEP_STEP`] steps; the in-plane translation is
+/// zero (the sensors of one rig are close together) and left to ICP.
+fn ground_sweep(reference: &[PlaneFeature], target: &[PlaneFeature]) -> Vec<Candidate> {
+    let mut out = Vec::new();
+    let Some(ground) = reference.first() else {
+        return out;
+    };
+    let n_ref = ground.plane.normal;
+    let steps = (std::f64::consts::TAU / SWEEP_STEP).round() as usize;
+    for t in target.iter().take(SWEEP_TARGET_PLANES) {
+        let n_tgt = t.plane.normal;
+        // Normals face their sensors, so the target plane's normal maps onto the reference's.
+        let align = nalgebra::Rotation3::rotation_between(&n_tgt.into_inner(), &n_ref.into_inner())
+            .unwrap_or_else(|| {
+                // Opposite normals: half a turn about any perpendicular axis.
+                let axis = n_ref.cross(&Vector3::x());
+                let axis = if axis.norm() > 0.1 {
+                    axis
+                } else {
+                    n_ref.cross(&Vector3::y())
+                };
+                nalgebra::Rotation3::new(axis.normalize() * std::f64::consts::PI)
+            });
+        let translation = n_ref.into_inner() * (t.plane.offset - ground.plane.offset);
+        for k in 0..steps {
+            let turn = nalgebra::Rotation3::from_axis_angle(&n_ref, k as f64 * SWEEP_STEP);
+            out.push(Candidate {
+                pose: isometry(&(turn * align), translation),
+                free: None,
+                support: 0.0,
+                sweep: true,
+            });
+        }
+    }
+    out
+}
+
+/// Options of the quick ICP of the screening (the first stage of the verification), for a
+/// plane-pair hypothesis or a ground-sweep one (wider first distance: the start is up to half a
+/// step of yaw and the in-plane translation away).
+fn screen_icp_options(sweep: bool) -> IcpOptions {
+    IcpOptions {
+        max_distance: if sweep { 2.0 } else { 1.0 },
+        min_distance: 0.5,
+        shrink: 0.7,
+        max_iterations: if sweep { 7 } else { 3 },
+        samples: 300,
+        step_tolerance: 1e-4,
+    }
+}
+
+/// Options of the short ICP that continues from the screened pose of each verified hypothesis.
 fn verify_icp_options() -> IcpOptions {
     IcpOptions {
-        max_distance: 1.0,
+        max_distance: 0.5,
         min_distance: 0.3,
         shrink: 0.7,
         max_iterations: 6,
         samples: 400,
         step_tolerance: 1e-4,
     }
+}
+
+/// A hypothesis after its short ICP, with its verification (see [`VIOLATION_WEIGHT`]).
+#[derive(Debug, Clone, Copy)]
+struct Verified {
+    pose: Isometry3<f64>,
+    agreement: f64,
+    violations: [f64; 2],
+    score: f64,
+}
+
+/// Indices and scores of the verified hypotheses, best first (ties keep the enumeration order).
+fn rank(verified: &[Option<Verified>]) -> Vec<(usize, f64)> {
+    let mut ranked: Vec<(usize, f64)> = verified
+        .iter()
+        .enumerate()
+        .filter_map(|(k, v)| v.map(|v| (k, v.score)))
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    ranked
 }
 
 fn mapped(points: &[Point3<f64>], pose: &Isometry3<f64>) -> Vec<Point3<f64>> {
@@ -830,18 +976,29 @@ pub fn calibrate_targetless(
     let (reference_ds, target_ds) = (ref_result?, tgt_result?);
     clock.lap("planes");
     for (prepared, which) in [(&reference_ds, "reference"), (&target_ds, "target")] {
-        if prepared.features.len() < 2 {
+        let needed = if options.ground_sweep { 1 } else { 2 };
+        if prepared.features.len() < needed {
             return Err(Error::Calibration(format!(
                 "the {which} cloud shows {} plane(s) with at least {} inliers; the targetless \
-                 method needs two non-parallel planes seen by both sensors",
+                 method needs {}",
                 prepared.features.len(),
-                options.min_inliers
+                options.min_inliers,
+                if options.ground_sweep {
+                    "a plane both sensors see (the ground)"
+                } else {
+                    "two non-parallel planes seen by both sensors"
+                }
             )));
         }
     }
 
     let (enumerated, candidates) = hypotheses(&reference_ds.features, &target_ds.features, options);
-    if candidates.is_empty() {
+    let sweep = if options.ground_sweep {
+        ground_sweep(&reference_ds.features, &target_ds.features)
+    } else {
+        Vec::new()
+    };
+    if candidates.is_empty() && sweep.is_empty() {
         return Err(Error::Calibration(format!(
             "no pair of non-parallel planes matches between the clouds ({} reference and {} \
              target planes; normals must agree within {:.1} deg)",
@@ -853,52 +1010,166 @@ pub fn calibrate_targetless(
     clock.lap("hypotheses");
 
     let surface = SurfaceCloud::new(reference_ds.points.clone())?;
+    let reference_image = RangeImage::new(&reference_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
+    let target_image = RangeImage::new(&target_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
     clock.lap("normals");
 
-    // Verification: short ICP from each of the best supported hypotheses, then point agreement.
-    let stride = target_ds.points.len().div_ceil(VERIFY_SAMPLES).max(1);
-    let verify_points: Vec<Point3<f64>> =
-        target_ds.points.iter().step_by(stride).copied().collect();
-    let short = verify_icp_options();
-    let verify_one = |c: &Candidate| -> (Isometry3<f64>, f64) {
-        match point_to_plane_icp(&surface, &target_ds.points, &c.pose, &short) {
-            Ok(r) => (
-                r.pose,
-                surface.overlap(&mapped(&verify_points, &r.pose), VERIFY_DISTANCE),
+    // Verification in two stages: a quick ICP and score for every hypothesis (screening), then
+    // a longer ICP and the full score for the best few distinct ones.
+    let sample = |points: &[Point3<f64>], count: usize| -> Vec<Point3<f64>> {
+        let stride = points.len().div_ceil(count).max(1);
+        points.iter().step_by(stride).copied().collect()
+    };
+    let full = [
+        sample(&target_ds.points, VERIFY_SAMPLES),
+        sample(&reference_ds.points, VERIFY_REFERENCE_SAMPLES),
+    ];
+    let quick = [
+        sample(&target_ds.points, SCREEN_SAMPLES),
+        sample(&reference_ds.points, SCREEN_REFERENCE_SAMPLES),
+    ];
+    let score = |pose: Isometry3<f64>,
+                 [target_points, reference_points]: &[Vec<Point3<f64>>; 2]| {
+        let agreement = surface.overlap(&mapped(target_points, &pose), VERIFY_DISTANCE);
+        let share = |count: usize, total: usize| count as f64 / total.max(1) as f64;
+        let violations = [
+            share(
+                reference_image.count_violations(target_points, &pose),
+                target_points.len(),
             ),
-            Err(_) => (c.pose, 0.0),
+            share(
+                target_image.count_violations(reference_points, &pose.inverse()),
+                reference_points.len(),
+            ),
+        ];
+        Verified {
+            pose,
+            agreement,
+            violations,
+            score: agreement - VIOLATION_WEIGHT * (violations[0] + violations[1]),
         }
+    };
+    let icp_then_score = |start: &Isometry3<f64>, icp: &IcpOptions, samples| {
+        point_to_plane_icp(&surface, &target_ds.points, start, icp)
+            .ok()
+            .map(|r| score(r.pose, samples))
     };
     let chosen: Vec<Candidate> = candidates
         .iter()
         .take(options.max_verified)
+        .chain(sweep.iter())
         .copied()
         .collect();
+    let (screen_pair, screen_sweep, short) = (
+        screen_icp_options(false),
+        screen_icp_options(true),
+        verify_icp_options(),
+    );
+    let screen_one = |c: &Candidate| {
+        let icp = if c.sweep { &screen_sweep } else { &screen_pair };
+        icp_then_score(&c.pose, icp, &quick)
+    };
     #[cfg(feature = "parallel")]
-    let verified: Vec<(Isometry3<f64>, f64)> = {
+    let screened: Vec<Option<Verified>> = {
         use rayon::prelude::*;
-        chosen.par_iter().map(verify_one).collect()
+        chosen.par_iter().map(screen_one).collect()
     };
     #[cfg(not(feature = "parallel"))]
-    let verified: Vec<(Isometry3<f64>, f64)> = chosen.iter().map(verify_one).collect();
-    let mut best = 0;
-    for (k, v) in verified.iter().enumerate() {
-        if v.1 > verified[best].1 {
-            best = k;
+    let screened: Vec<Option<Verified>> = chosen.iter().map(screen_one).collect();
+    let mut kept: Vec<(usize, Isometry3<f64>)> = Vec::new();
+    for (k, _) in rank(&screened) {
+        if kept.len() >= SCREEN_KEEP {
+            break;
+        }
+        let Some(Some(v)) = screened.get(k) else {
+            continue;
+        };
+        if !kept
+            .iter()
+            .any(|(_, p)| same_pose(p, &v.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+        {
+            kept.push((k, v.pose));
         }
     }
-    let (polished, best_score) = verified[best];
-    if best_score <= 0.0 {
+    let verify_one = |(_, pose): &(usize, Isometry3<f64>)| icp_then_score(pose, &short, &full);
+    #[cfg(feature = "parallel")]
+    let verified: Vec<Option<Verified>> = {
+        use rayon::prelude::*;
+        kept.par_iter().map(verify_one).collect()
+    };
+    #[cfg(not(feature = "parallel"))]
+    let verified: Vec<Option<Verified>> = kept.iter().map(verify_one).collect();
+    let ranked = rank(&verified);
+    let Some(&(best, _)) = ranked.first() else {
         return Err(Error::Calibration(
             "no plane hypothesis brings the clouds into agreement (ICP found no overlap)".into(),
         ));
-    }
-    let second_score = verified
+    };
+    let (Some(Some(mut top)), Some(&winner)) = (
+        verified.get(best),
+        kept.get(best).and_then(|(k, _)| chosen.get(*k)),
+    ) else {
+        return Err(Error::Numerical(
+            "verification lost its best hypothesis".into(),
+        ));
+    };
+    let mut runner_up = ranked
         .iter()
-        .filter(|(pose, _)| !same_pose(pose, &polished, DISTINCT_ANGLE, DISTINCT_DISTANCE))
-        .map(|v| v.1)
-        .fold(0.0, f64::max);
-    let winner = chosen[best];
+        .filter_map(|&(k, _)| verified.get(k).copied().flatten())
+        .find(|v| !same_pose(&v.pose, &top.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE));
+    // A close runner-up may be the same answer, not polished as far: both get the full ICP
+    // and are scored again before the result is called ambiguous.
+    if let Some(second) = runner_up.filter(|r| r.score >= AMBIGUITY_RATIO * top.score) {
+        let polish = |v: &Verified| {
+            point_to_plane_icp(&surface, &target_ds.points, &v.pose, &options.icp_options)
+                .ok()
+                .map(|r| score(r.pose, &full))
+        };
+        let (a, b) = (polish(&top), polish(&second));
+        match (a, b) {
+            (Some(a), Some(b))
+                if same_pose(&a.pose, &b.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) =>
+            {
+                top = if b.score > a.score { b } else { a };
+                runner_up = None;
+            }
+            (Some(a), Some(b)) => {
+                (top, runner_up) = if b.score > a.score {
+                    (b, Some(a))
+                } else {
+                    (a, Some(b))
+                };
+            }
+            (Some(a), None) => top = a,
+            (None, Some(b)) => top = b,
+            (None, None) => {}
+        }
+    }
+    let (polished, best_score) = (top.pose, top.score);
+    if best_score <= 0.0 {
+        return Err(Error::Calibration(format!(
+            "no hypothesis brings the clouds into agreement: the best verified pose agrees on \
+             {:.1} % of the target points and puts {:.1} % / {:.1} % of the points into space \
+             the other sensor saw through",
+            100.0 * top.agreement,
+            100.0 * top.violations[0],
+            100.0 * top.violations[1]
+        )));
+    }
+    let second_score = runner_up.map_or(0.0, |r| r.score.max(0.0));
+    let ambiguous = second_score >= AMBIGUITY_RATIO * best_score;
+    // Refused after the observability check below, whose reason is the more fundamental one
+    // (a corridor is ambiguous along its axis because nothing constrains that direction).
+    let ambiguity = (ambiguous && options.refuse_ambiguous).then(|| {
+        let (angle, distance) = runner_up.map_or((0.0, 0.0), |r| pose_error(&r.pose, &polished));
+        format!(
+            "ambiguous: two poses {:.1} deg and {:.2} m apart verify almost equally well \
+             (scores {best_score:.3} and {second_score:.3}; a symmetric scene such as a straight \
+             street seen from its middle); add structure that breaks the symmetry",
+            angle.to_degrees(),
+            distance
+        )
+    });
     clock.lap("verify");
 
     // Plane refinement on every matched plane.
@@ -1010,6 +1281,10 @@ pub fn calibrate_targetless(
         )));
     }
 
+    if let Some(message) = ambiguity {
+        return Err(Error::Calibration(message));
+    }
+
     // Matched planes, their input indices and residuals at the result.
     let expand = |prepared: &Prepared, f: &PlaneFeature| -> Vec<usize> {
         let mut inlier_voxel = vec![false; prepared.points.len()];
@@ -1056,10 +1331,14 @@ pub fn calibrate_targetless(
             .collect(),
         rmse,
         hypotheses: [enumerated, candidates.len()],
-        verified: verified.len(),
-        triplet: winner.free.is_none(),
+        verified: chosen.len(),
+        triplet: !winner.sweep && winner.free.is_none(),
+        sweep: winner.sweep,
         best_score,
         second_score,
+        agreement: top.agreement,
+        violations: top.violations,
+        ambiguous,
         distance_thresholds: [reference_ds.threshold, target_ds.threshold],
         report,
         icp,

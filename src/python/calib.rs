@@ -211,7 +211,7 @@ impl CalibrationResult {
         self.targetless()
             .map(|t| (t.hypotheses[0], t.hypotheses[1]))
     }
-    /// Verification score (fraction of target points agreeing) of the best hypothesis
+    /// Verification score of the best hypothesis: agreement minus 3 x the free-space violations
     /// (targetless only).
     #[getter]
     fn best_score(&self) -> Option<f64> {
@@ -221,6 +221,24 @@ impl CalibrationResult {
     #[getter]
     fn second_score(&self) -> Option<f64> {
         self.targetless().map(|t| t.second_score)
+    }
+    /// Share of the checked target points within 25 cm of a reference point at the best
+    /// hypothesis (targetless only).
+    #[getter]
+    fn agreement(&self) -> Option<f64> {
+        self.targetless().map(|t| t.agreement)
+    }
+    /// (target points in the reference's free space, reference points in the target's) as shares
+    /// of the checked points, at the best hypothesis (targetless only).
+    #[getter]
+    fn violations(&self) -> Option<(f64, f64)> {
+        self.targetless()
+            .map(|t| (t.violations[0], t.violations[1]))
+    }
+    /// Whether the winning hypothesis came from the ground sweep (targetless only).
+    #[getter]
+    fn sweep(&self) -> Option<bool> {
+        self.targetless().map(|t| t.sweep)
     }
     /// Whether the winning hypothesis was a plane triplet rather than a pair (targetless only).
     #[getter]
@@ -409,10 +427,16 @@ impl CalibrationResult {
     fn hypothesis_margin(&self) -> Option<f64> {
         self.poles().map(|p| p.margin)
     }
-    /// True when the margin is below 1 (a near-tie, though not refused); None for planes.
+    /// Poles: True when the margin is below 1 (a near-tie, though not refused). Targetless: True
+    /// when a distinct pose verified almost as well as the best (only returned with
+    /// refuse_ambiguous=False). None for the corner method.
     #[getter]
     fn ambiguous(&self) -> Option<bool> {
-        self.poles().map(|p| p.ambiguous)
+        match &self.inner {
+            Inner::Poles(p) => Some(p.ambiguous),
+            Inner::Targetless(t) => Some(t.ambiguous),
+            Inner::Planes(_) => None,
+        }
     }
     /// (6, 6) covariance of the left-perturbation tangent [rho, phi] (m, rad), or None.
     #[getter]
@@ -448,10 +472,11 @@ impl CalibrationResult {
         let extra = match &self.inner {
             Inner::Planes(_) => String::new(),
             Inner::Targetless(t) => format!(
-                ", matched_planes={}, best_score={:.3}, second_score={:.3}",
+                ", matched_planes={}, best_score={:.3}, second_score={:.3}, ambiguous={}",
                 t.planes_reference.len(),
                 t.best_score,
-                t.second_score
+                t.second_score,
+                if t.ambiguous { "True" } else { "False" }
             ),
             Inner::Poles(p) => format!(
                 ", poles={}, hypothesis_margin={:.2}, ambiguous={}",
@@ -674,11 +699,14 @@ fn calibrate_poles(
 /// voxel_size: downsampling voxel (m). max_planes: planes per cloud. max_translation: hypotheses
 ///     moving the target further (m) are dropped (sensors of one rig are close). icp: run the final
 ///     ICP. min_information_share: the weakest direction's share of the information below which
-///     the calibration is refused as unobservable.
+///     the calibration is refused as unobservable. ground_sweep: also hypothesise from the
+///     largest plane of each cloud turned about its normal (no common plane pair needed).
+///     refuse_ambiguous: raise when a distinct pose verifies almost as well as the best (else
+///     return it with ambiguous=True).
 /// Raises CalibrationError naming why (too few planes, nothing verifies, an unconstrained
 /// direction such as the axis of a corridor).
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=0.1, max_planes=10, max_translation=5.0, icp=true, min_information_share=0.01, seed=0))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=0.1, max_planes=10, max_translation=5.0, icp=true, min_information_share=0.01, ground_sweep=true, refuse_ambiguous=true, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_targetless(
     py: Python<'_>,
@@ -690,11 +718,15 @@ fn calibrate_targetless(
     max_translation: f64,
     icp: bool,
     min_information_share: f64,
+    ground_sweep: bool,
+    refuse_ambiguous: bool,
     seed: u64,
 ) -> PyResult<CalibrationResult> {
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;
     let options = TargetlessOptions {
+        ground_sweep,
+        refuse_ambiguous,
         distance_threshold,
         voxel_size,
         max_planes,

@@ -1,0 +1,167 @@
+//! Free-space (visibility) consistency of two scans under a candidate transform.
+//!
+//! A LiDAR return at range `r` along a ray says more than "a surface is here": the space along
+//! the ray in front of it is **empty**. A wrong transform (a 180-degree turn of a symmetric
+//! street, a pose shifted along a facade) can make many points of one scan land near points of
+//! the other, so point agreement alone cannot tell it from the truth; but it also puts points of
+//! one scan into space the other sensor saw through, which the truth never does (up to moving
+//! objects and noise).
+//!
+//! [`RangeImage`] bins a scan by azimuth and elevation around its own sensor and keeps the
+//! nearest range per bin. A point (in that sensor's frame) is a **violation** when its bin holds a
+//! return and the point lies clearly in front of it: `r < r_near - (VIOLATION_MARGIN +
+//! VIOLATION_RELATIVE_MARGIN r_near)`. Points beyond the nearest return (occluded), in empty bins
+//! (sky, outside the field of view) or within [`MIN_VISIBILITY_RANGE`] of the sensor (the blind
+//! zone, the vehicle itself) are neutral. Keeping the *nearest* return per bin is the conservative
+//! choice: a bin that holds the edge of a wall and the road behind it only counts the wall.
+//!
+//! ```
+//! use lidarcal::visibility::RangeImage;
+//! use nalgebra::Point3;
+//!
+//! // A wall 10 m ahead (x = 10).
+//! let wall: Vec<_> = (0..400)
+//!     .map(|i| Point3::new(10.0, (i % 20) as f64 * 0.2 - 2.0, (i / 20) as f64 * 0.2 - 2.0))
+//!     .collect();
+//! let image = RangeImage::new(&wall, RangeImage::DEFAULT_RESOLUTION)?;
+//! assert_eq!(image.violation(&Point3::new(5.0, 0.0, 0.0)), Some(true)); // in the free space
+//! assert_eq!(image.violation(&Point3::new(10.02, 0.0, 0.0)), Some(false)); // on the wall
+//! assert_eq!(image.violation(&Point3::new(20.0, 0.0, 0.0)), Some(false)); // behind it
+//! assert_eq!(image.violation(&Point3::new(-5.0, 0.0, 0.0)), None); // never looked there
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+
+use nalgebra::{Isometry3, Point3};
+
+use crate::error::{ensure_finite, Error, Result};
+
+/// Points closer than this to the sensor (metres) are neutral: the blind zone of a spinning
+/// LiDAR and the vehicle it is mounted on.
+pub const MIN_VISIBILITY_RANGE: f64 = 3.0;
+/// Absolute part of the margin by which a point must lie in front of the nearest return (m).
+pub const VIOLATION_MARGIN: f64 = 0.5;
+/// Relative part of that margin (share of the nearest return's range): bins widen with range.
+pub const VIOLATION_RELATIVE_MARGIN: f64 = 0.05;
+
+/// The nearest range per azimuth/elevation bin of one scan, around its sensor (see the module
+/// docs).
+#[derive(Debug, Clone)]
+pub struct RangeImage {
+    resolution: f64,
+    columns: usize,
+    rows: usize,
+    nearest: Vec<f32>,
+}
+
+impl RangeImage {
+    /// Default bin size (radians, 1 degree).
+    pub const DEFAULT_RESOLUTION: f64 = std::f64::consts::PI / 180.0;
+
+    /// Bins `points` (in the sensor's frame) at `resolution` radians. Points within
+    /// [`MIN_VISIBILITY_RANGE`] are left out.
+    pub fn new(points: &[Point3<f64>], resolution: f64) -> Result<Self> {
+        if !(resolution.is_finite() && resolution > 1e-4 && resolution < 1.0) {
+            return Err(Error::InvalidInput(format!(
+                "range image resolution must be in (1e-4, 1) rad, got {resolution}"
+            )));
+        }
+        ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
+        let columns = (std::f64::consts::TAU / resolution).ceil() as usize;
+        let rows = (std::f64::consts::PI / resolution).ceil() as usize + 1;
+        let mut image = RangeImage {
+            resolution,
+            columns,
+            rows,
+            nearest: vec![f32::INFINITY; columns * rows],
+        };
+        for p in points {
+            let r = p.coords.norm();
+            if r < MIN_VISIBILITY_RANGE {
+                continue;
+            }
+            if let Some(slot) = image.bin(p, r).and_then(|b| image.nearest.get_mut(b)) {
+                *slot = slot.min(r as f32);
+            }
+        }
+        Ok(image)
+    }
+
+    fn bin(&self, p: &Point3<f64>, r: f64) -> Option<usize> {
+        if r <= 0.0 {
+            return None;
+        }
+        let azimuth = p.y.atan2(p.x) + std::f64::consts::PI;
+        let elevation = (p.z / r).clamp(-1.0, 1.0).asin() + std::f64::consts::FRAC_PI_2;
+        let c = ((azimuth / self.resolution) as usize).min(self.columns - 1);
+        let row = ((elevation / self.resolution) as usize).min(self.rows - 1);
+        Some(row * self.columns + c)
+    }
+
+    /// Whether `p` (sensor frame) lies in space the scan saw through: `Some(true)` for a
+    /// violation, `Some(false)` when it is on or behind the scan's return, `None` when neutral.
+    pub fn violation(&self, p: &Point3<f64>) -> Option<bool> {
+        let r = p.coords.norm();
+        if !r.is_finite() || r < MIN_VISIBILITY_RANGE {
+            return None;
+        }
+        let near = f64::from(*self.nearest.get(self.bin(p, r)?)?);
+        if !near.is_finite() {
+            return None;
+        }
+        Some(r < near - VIOLATION_MARGIN - VIOLATION_RELATIVE_MARGIN * near)
+    }
+
+    /// The number of `points` (another scan's, in its own sensor's frame) that violate this
+    /// scan's free space once mapped by `this_from_points`. Points within
+    /// [`MIN_VISIBILITY_RANGE`] of their own sensor are left out as well: they are mostly the
+    /// vehicle both sensors ride on, which the other sensor's blind zone hides.
+    pub fn count_violations(
+        &self,
+        points: &[Point3<f64>],
+        this_from_points: &Isometry3<f64>,
+    ) -> usize {
+        points
+            .iter()
+            .filter(|p| p.coords.norm() >= MIN_VISIBILITY_RANGE)
+            .filter(|p| self.violation(&(this_from_points * *p)) == Some(true))
+            .count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_resolution_and_points() {
+        assert!(RangeImage::new(&[], 0.0).is_err());
+        assert!(RangeImage::new(&[], f64::NAN).is_err());
+        assert!(RangeImage::new(&[Point3::new(f64::NAN, 0.0, 0.0)], 0.01).is_err());
+        let empty = RangeImage::new(&[], 0.01).unwrap();
+        assert_eq!(empty.violation(&Point3::new(5.0, 0.0, 0.0)), None);
+        assert_eq!(empty.violation(&Point3::origin()), None);
+    }
+
+    #[test]
+    fn poles_straight_up_and_down_have_a_bin() {
+        let image = RangeImage::new(&[Point3::new(0.0, 0.0, 10.0)], 0.02).unwrap();
+        assert_eq!(image.violation(&Point3::new(0.0, 0.0, 5.0)), Some(true));
+        assert_eq!(image.violation(&Point3::new(0.0, 0.0, -5.0)), None);
+    }
+
+    #[test]
+    fn counting_uses_the_transform() {
+        // A 6 x 6 m wall 10 m ahead; a 2 x 2 m patch of it, moved 4 m closer, lies in front of it.
+        let grid = |half: i32| -> Vec<Point3<f64>> {
+            (-half..=half)
+                .flat_map(|i| (-half..=half).map(move |j| (i, j)))
+                .map(|(i, j)| Point3::new(10.0, f64::from(i) * 0.1, f64::from(j) * 0.1))
+                .collect()
+        };
+        let (wall, patch) = (grid(30), grid(10));
+        let image = RangeImage::new(&wall, RangeImage::DEFAULT_RESOLUTION).unwrap();
+        let shifted = Isometry3::translation(-4.0, 0.0, 0.0);
+        assert_eq!(image.count_violations(&patch, &Isometry3::identity()), 0);
+        assert_eq!(image.count_violations(&patch, &shifted), patch.len());
+    }
+}
