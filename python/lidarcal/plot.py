@@ -93,6 +93,17 @@ def _subsample(n: int, rng: np.random.Generator) -> npt.NDArray[np.int64]:
     return np.sort(rng.choice(n, MAX_POINTS, replace=False))
 
 
+def _around(
+    points: F64Array, targets: list[F64Array], margin: float = 5.0
+) -> npt.NDArray[np.bool_]:
+    """Which ``points`` lie in the box spanning the targets' 1-99 % extent plus ``margin``."""
+    both = np.concatenate(targets)
+    lo = np.percentile(both, 1, axis=0) - margin
+    hi = np.percentile(both, 99, axis=0) + margin
+    inside: npt.NDArray[np.bool_] = np.all((points >= lo) & (points <= hi), axis=1)
+    return inside
+
+
 def _view(
     ax: Axes,
     ref: F64Array,
@@ -171,20 +182,25 @@ def overlay(
     fig.suptitle(
         f"{title or 'lidarcal'} ({method}): {pose}\nreference blue, target orange", fontsize=11
     )
-    _view(fig.add_subplot(grid[0, 0]), ref[ri], tgt_before[ti], (0, 1), "before, top (x-y)", [])
-    _view(fig.add_subplot(grid[1, 0]), ref[ri], tgt_before[ti], (0, 2), "before, side (x-z)", [])
-    _view(fig.add_subplot(grid[0, 1]), ref[ri], tgt_after[ti], (0, 1), "after, top (x-y)", [])
-    _view(fig.add_subplot(grid[1, 1]), ref[ri], tgt_after[ti], (0, 2), "after, side (x-z)", [])
+    # A roof unit sees 100 m around while a side unit sees 20: show the reference only around
+    # the target (its 1-99 % extent plus a margin), where the alignment can be judged.
+    ref_before = ref[ri][_around(ref[ri], [tgt_before[ti], tgt_after[ti]])]
+    ref_after = ref[ri][_around(ref[ri], [tgt_after[ti]])]
+    _view(fig.add_subplot(grid[0, 0]), ref_before, tgt_before[ti], (0, 1), "before, top (x-y)", [])
+    _view(fig.add_subplot(grid[1, 0]), ref_before, tgt_before[ti], (0, 2), "before, side (x-z)", [])
+    _view(fig.add_subplot(grid[0, 1]), ref_after, tgt_after[ti], (0, 1), "after, top (x-y)", [])
+    _view(fig.add_subplot(grid[1, 1]), ref_after, tgt_after[ti], (0, 2), "after, side (x-z)", [])
     ax = fig.add_subplot(grid[0, 2])
     if highlights:
         kind = "poles" if calibration is not None and calibration.method == "poles" else "planes"
+        box = [tgt_after[ti]]
         _view(
             ax,
-            ref[ri[:: max(1, len(ri) // 10000)]],
+            ref_after[:: max(1, len(ref_after) // 10000)],
             tgt_after[ti[:: max(1, len(ti) // 10000)]],
             (0, 1),
             f"matched {kind} after calibration, one colour each",
-            highlights,
+            [(pts[_around(pts, box)], colour) for pts, colour in highlights],
         )
     else:
         ax.set_axis_off()
