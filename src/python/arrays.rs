@@ -206,6 +206,24 @@ pub(crate) fn vector6(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vector6<f6
     Ok(Vector6::from_column_slice(&vector(obj, name, Some(6))?))
 }
 
+/// A `seed` argument: any non-negative Python integer below 2**64. Without this, PyO3's own
+/// conversion raises an `OverflowError` that does not name the argument.
+pub(crate) fn seed(obj: &Bound<'_, PyAny>) -> PyResult<u64> {
+    let bad = || {
+        PyValueError::new_err(format!(
+            "seed must be an integer in [0, 2**64), got {}",
+            obj.repr()
+                .map(|r| r.to_string())
+                .unwrap_or_else(|_| "?".into())
+        ))
+    };
+    if obj.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(bad());
+    }
+    let value: i128 = obj.extract().map_err(|_| bad())?;
+    u64::try_from(value).map_err(|_| bad())
+}
+
 /// A new NumPy array of the given shape from row-major data.
 pub(crate) fn to_numpy<'py, D: Dimension>(
     py: Python<'py>,

@@ -566,7 +566,7 @@ fn calibrate_planes(
     reference: &Bound<'_, PyAny>,
     target: &Bound<'_, PyAny>,
     distance_threshold: Option<f64>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     up: Option<&Bound<'_, PyAny>>,
     refine: bool,
     loss: &str,
@@ -640,7 +640,7 @@ fn calibrate_poles(
     intensity_threshold: Option<f64>,
     vendor: Option<&str>,
     pole_radius: Option<f64>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     axis_fit: &str,
     cluster_tolerance: f64,
     min_points: usize,
@@ -720,7 +720,7 @@ fn calibrate_targetless(
     min_information_share: f64,
     ground_sweep: bool,
     refuse_ambiguous: bool,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<CalibrationResult> {
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;

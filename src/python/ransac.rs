@@ -151,7 +151,7 @@ fn ransac_plane(
     distance_threshold: f64,
     confidence: f64,
     max_iterations: usize,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<PyPlane> {
     let points = arrays::points(points, "points")?;
     let opts = options(distance_threshold, confidence, max_iterations, seed);
@@ -173,7 +173,7 @@ fn ransac_line(
     distance_threshold: f64,
     confidence: f64,
     max_iterations: usize,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<PyLine> {
     let points = arrays::points(points, "points")?;
     let opts = options(distance_threshold, confidence, max_iterations, seed);
@@ -206,7 +206,7 @@ fn extract_planes(
     min_angle_deg: Option<f64>,
     confidence: f64,
     max_iterations: usize,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<Vec<PyPlane>> {
     let points = arrays::points(points, "points")?;
     let opts = ExtractOptions {

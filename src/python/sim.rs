@@ -260,7 +260,7 @@ fn sim_scan<'py>(
     shapes: &Bound<'py, PyAny>,
     model: Option<&Bound<'py, PyAny>>,
     sensor_pose: Option<&Bound<'py, PyAny>>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     noise: Option<f64>,
     dropout: f64,
     with_ring: bool,
@@ -399,7 +399,7 @@ impl Scene {
 fn sim_corner_scene<'py>(
     py: Python<'py>,
     model: Option<&Bound<'py, PyAny>>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     clutter_boxes: usize,
     extra_walls: usize,
     noise: Option<f64>,
@@ -431,7 +431,7 @@ fn sim_corner_scene<'py>(
 #[pyo3(signature = (*, seed=0, side="left", target_tilt_deg=45.0, clutter=true, cross_wall=false, noise=None))]
 fn sim_street_scene(
     py: Python<'_>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     side: &str,
     target_tilt_deg: f64,
     clutter: bool,
@@ -465,7 +465,10 @@ fn sim_street_scene(
 /// The corridor scene (floor and two parallel walls): translation along it is unobservable.
 #[pyfunction]
 #[pyo3(signature = (*, seed=0))]
-fn sim_corridor_scene(py: Python<'_>, seed: u64) -> PyResult<Scene> {
+fn sim_corridor_scene(
+    py: Python<'_>,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
+) -> PyResult<Scene> {
     let inner = run(py, move || corridor_scene(seed))?;
     Ok(Scene {
         kind: "corridor",
@@ -480,7 +483,7 @@ fn sim_corridor_scene(py: Python<'_>, seed: u64) -> PyResult<Scene> {
 fn sim_poles_scene<'py>(
     py: Python<'py>,
     model: Option<&Bound<'py, PyAny>>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     radius: f64,
     distance: f64,
     distractor: bool,
@@ -514,7 +517,7 @@ fn sim_paper_scene(
     py: Python<'_>,
     alpha_deg: f64,
     configuration: Option<u8>,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<Scene> {
     let configuration = match configuration {
         Some(1) => PaperConfiguration::One,
@@ -594,7 +597,7 @@ fn sim_pole_axis_trial(
     py: Python<'_>,
     distance: f64,
     radius: f64,
-    seed: u64,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<(usize, f64, f64, f64, f64)> {
     let t = run(py, move || {
         crate::sim::study::pole_axis_trial(distance, radius, seed)

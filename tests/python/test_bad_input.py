@@ -245,6 +245,18 @@ CASES: list[Case] = [
         "must be in its own sensor's frame",
     ),
     Case(
+        "planes: seed -1",
+        planes(lambda: corner()[0], seed=-1),
+        ValueError,
+        "seed must be an integer in [0, 2**64), got -1",
+    ),
+    Case(
+        "planes: seed 2.5",
+        planes(lambda: corner()[0], seed=2.5),
+        ValueError,
+        "seed must be an integer in [0, 2**64), got 2.5",
+    ),
+    Case(
         "planes: threshold 100 m",
         planes(lambda: corner()[0], distance_threshold=100.0),
         CE,
