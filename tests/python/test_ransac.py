@@ -154,7 +154,7 @@ def test_bad_input() -> None:
         lidarcal.ransac_plane(good, 0.1, confidence=1.5)
     with pytest.raises(ValueError, match="max_iterations"):
         lidarcal.ransac_plane(good, 0.1, max_iterations=0)
-    with pytest.raises(OverflowError):
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 2\*\*64\), got -1"):
         lidarcal.ransac_plane(good, 0.1, seed=-1)
     with pytest.raises(ValueError, match=r"shape \(N, 3\) or \(N, 4\)"):
         lidarcal.ransac_plane(np.zeros((10, 2)), 0.1)
