@@ -147,6 +147,8 @@ class RigCalibration:
     direct: dict[str, F64Array]
     edges: list[RigEdge]
     failures: dict[tuple[str, str], str] = field(default_factory=dict)
+    #: Targets no calibration connects to the reference (only with ``require_all=False``).
+    unconnected: list[str] = field(default_factory=list)
 
 
 def _edge_error(a_from_b: F64Array, ref_from_a: F64Array, ref_from_b: F64Array) -> F64Array:
@@ -211,6 +213,7 @@ def calibrate_rig(
     *,
     method: Method = "auto",
     pairwise: bool = True,
+    require_all: bool = True,
     seed: int = 0,
 ) -> RigCalibration:
     """Calibrates several target LiDARs against one reference and makes the set consistent.
@@ -222,7 +225,9 @@ def calibrate_rig(
     is then refined by Gauss-Newton with the reference fixed, so that ``a_from_b`` of every pair
     agrees with ``reference_from_a`` and ``reference_from_b``. A target that fails against the
     reference but overlaps a calibrated target is reached through it. Raises
-    :class:`CalibrationError` when some target cannot be connected to the reference.
+    :class:`CalibrationError` when some target cannot be connected to the reference, unless
+    ``require_all=False``: then the others are returned and that target is listed in
+    ``unconnected`` (with its reasons in ``failures``).
     """
     ref = _cloud(reference, "reference")
     if isinstance(targets, Mapping):
@@ -272,11 +277,13 @@ def calibrate_rig(
                 poses[a] = poses[b] @ np.linalg.inv(r.transform)
                 changed = True
     missing = [n for n in names if n not in poses]
-    if missing:
+    if missing and (require_all or len(poses) == 1):
         reasons = "; ".join(f"{a}->{b}: {m}" for (a, b), m in failures.items())
         raise CalibrationError(
             f"could not connect {', '.join(missing)} to the reference ({reasons})"
         )
+    # Edges between targets that nothing connects to the reference cannot be placed.
+    measured = [(a, b, r) for a, b, r in measured if a in poses and b in poses]
     graph = [(a, b, r.transform, _information(r)) for a, b, r in measured]
     refined = _refine_graph(poses, graph)
     edges = []
@@ -293,8 +300,9 @@ def calibrate_rig(
             )
         )
     return RigCalibration(
-        transforms={n: refined[n] for n in names},
+        transforms={n: refined[n] for n in names if n in refined},
         direct=direct,
         edges=edges,
         failures=failures,
+        unconnected=missing,
     )

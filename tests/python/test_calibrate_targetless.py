@@ -84,6 +84,22 @@ def test_rig_is_consistent() -> None:
         assert np.isfinite(e.rotation_residual_deg) and np.isfinite(e.translation_residual_m)
 
 
+def test_rig_with_an_unconnectable_target() -> None:
+    left = sim.street_scene(seed=0, side="left")
+    # A unit that sees only flat ground: nothing fixes its yaw or position, so it is never
+    # connected to the reference.
+    rng = np.random.default_rng(0)
+    ground = np.column_stack([rng.uniform(-10, 10, (5000, 2)), rng.normal(-1.8, 0.01, 5000)])
+    targets = {"left": left.target, "ground": ground}
+    with pytest.raises(lidarcal.CalibrationError, match="could not connect ground"):
+        lidarcal.calibrate_rig(left.reference, targets, method="targetless")
+    rig = lidarcal.calibrate_rig(left.reference, targets, method="targetless", require_all=False)
+    assert rig.unconnected == ["ground"] and set(rig.transforms) == {"left"}
+    assert ("reference", "ground") in rig.failures
+    angle, dist = errors(left.reference_from_target, rig.transforms["left"])
+    assert angle < 0.2 and dist < 0.05
+
+
 def test_bad_input() -> None:
     scene = sim.corridor_scene(seed=0)
     with pytest.raises(ValueError, match="at least 100"):
