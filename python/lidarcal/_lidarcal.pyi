@@ -14,6 +14,8 @@ Frame = Literal["target", "reference"]
 LossName = Literal["squared", "linear", "huber", "cauchy"]
 
 __version__: str
+#: Names an intensity field may have in a file, compared without case; the first is canonical.
+INTENSITY_NAMES: tuple[str, ...]
 
 class CalibrationError(RuntimeError):
     """A calibration could not produce a trustworthy result; the message says why."""

@@ -33,7 +33,14 @@ from lidarcal import (
     read_points,
     sim,
 )
-from lidarcal.export import rpy, static_transform_publisher, to_dict, write_result
+from lidarcal.export import (
+    OUTPUT_SUFFIXES,
+    frame_id,
+    rpy,
+    static_transform_publisher,
+    to_dict,
+    write_result,
+)
 
 
 @click.group()
@@ -198,8 +205,7 @@ def demo(
         timings_ms=result.timings,
     )
     if output is not None:
-        if output.suffix.lower() not in (".yaml", ".yml", ".json", ".txt", ".urdf"):
-            raise click.BadParameter("use .yaml, .json, .txt or .urdf", param_hint="--output")
+        _check_output(output)
         try:
             write_result(output, report)
         except OSError as e:
@@ -252,9 +258,7 @@ class Source:
     @property
     def frame(self) -> str:
         """A frame name for URDF / tf: the topic for bags, else the file's stem."""
-        base = self.topic.strip("/") if self.topic else self.path.stem
-        cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in base)
-        return cleaned or "frame"
+        return frame_id(self.topic.strip("/") if self.topic else self.path.stem, "frame")
 
 
 # click >= 8.2 makes ParamType generic; subscripting it would break older clicks at import.
@@ -341,6 +345,11 @@ def _summary(entry: dict[str, Any], parent: str, child: str) -> str:
     lines.append(f"  feature rmse cm   {rmse}")
     lines.append("  " + static_transform_publisher(t, parent, child))
     return "\n".join(lines)
+
+
+def _check_output(output: Path) -> None:
+    if output.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise click.BadParameter("use .yaml, .json, .txt or .urdf", param_hint="--output")
 
 
 def _plot(
@@ -465,14 +474,8 @@ def calibrate(
         "vendor": vendor,
         "seed": seed,
     }
-    if output is not None and output.suffix.lower() not in (
-        ".yaml",
-        ".yml",
-        ".json",
-        ".txt",
-        ".urdf",
-    ):
-        raise click.BadParameter("use .yaml, .json, .txt or .urdf", param_hint="--output")
+    if output is not None:
+        _check_output(output)
     try:
         ref_points = load_cloud(reference, crop_box, topic, bag_time)
     except (ValueError, OSError) as e:

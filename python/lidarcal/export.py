@@ -34,7 +34,12 @@ from lidarcal._lidarcal import CalibrationResult
 
 F64Array = npt.NDArray[np.float64]
 
+#: The extensions :func:`write_result` writes.
+OUTPUT_SUFFIXES = (".yaml", ".yml", ".json", ".txt", ".urdf")
+
 __all__ = [
+    "OUTPUT_SUFFIXES",
+    "frame_id",
     "quaternion_xyzw",
     "rpy",
     "static_transform_publisher",
@@ -229,10 +234,14 @@ def to_yaml(data: dict[str, Any] | list[dict[str, Any]]) -> str:
     return "\n".join(_yaml(data, 0)) + "\n"
 
 
-def _frame(name: str | None, default: str) -> str:
-    stem = Path(name).stem if name else default
-    cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in stem)
+def frame_id(text: str, default: str) -> str:
+    """``text`` as a URDF / tf frame id: letters, digits and ``_`` (others become ``_``)."""
+    cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in text)
     return cleaned or default
+
+
+def _frame(name: str | None, default: str) -> str:
+    return frame_id(Path(name).stem, default) if name else default
 
 
 def static_transform_publisher(

@@ -19,14 +19,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from lidarcal._lidarcal import FileFormatError
+from lidarcal._lidarcal import INTENSITY_NAMES, FileFormatError
 
 F64Array = npt.NDArray[np.float64]
 
 __all__ = ["BAG_SUFFIXES", "is_bag", "read_bag"]
 
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
-INTENSITY_NAMES = ("intensity", "i", "reflectivity", "scalar_intensity", "remission", "reflectance")
 POINTCLOUD2 = ("sensor_msgs/msg/PointCloud2", "sensor_msgs/PointCloud2")
 
 # sensor_msgs/PointField datatypes -> NumPy type codes.

@@ -82,6 +82,10 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("CalibrationError", m.py().get_type::<CalibrationError>())?;
     m.add("FileFormatError", m.py().get_type::<FileFormatError>())?;
+    m.add(
+        "INTENSITY_NAMES",
+        pyo3::types::PyTuple::new(m.py(), crate::io::INTENSITY_NAMES)?,
+    )?;
     io::register(m)?;
     kernels::register(m)?;
     ransac::register(m)?;
