@@ -5,7 +5,8 @@ Run from the repository root after installing the wheel:
 
 Prints, for every real_world scene, left->top and right->top against the reference (rotation
 error = angle of R_true R^T, translation error = |t_true - t|), the spread of our own results
-across the three scenes, and the four hesai QT units against the P64 (weaker reference).
+across the three scenes, the four hesai QT units against the P64 (weaker reference), and what
+calibrate_rig (pairwise edges and the pose graph) makes of each real_world scene and of hesai.
 """
 
 from __future__ import annotations
@@ -83,6 +84,42 @@ def main() -> None:
             continue
         a, t = errors(truth, est)
         print(f"| {qt} | {a:.3f} | {t:.3f} | {dt:.2f} | {note} |")
+    print()
+    print("calibrate_rig(method='targetless', require_all=False): pose-graph result vs reference")
+    print("| rig | target | rot err (deg) | trans err (m) | kept edges |")
+    print("|---|---|---|---|---|")
+    rigs: list[tuple[str, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]] = []
+    for scene in sorted(refs["real_world"]):
+        d = base / "real_world" / scene
+        rigs.append(
+            (
+                scene,
+                np.load(d / "top.npy")[:, :3],
+                {side: np.load(d / f"{side}.npy")[:, :3] for side in ("left", "right")},
+                {
+                    side: np.array(refs["real_world"][scene][f"{side}_to_top"]["matrix_4x4"])
+                    for side in ("left", "right")
+                },
+            )
+        )
+    qts = ("qt_201", "qt_202", "qt_203", "qt_204")
+    rigs.append(
+        (
+            "hesai_scene1",
+            p64,
+            {qt: np.load(h / f"{qt}.npy")[:, :3] for qt in qts},
+            {qt: np.array(refs["hesai_scene1"][f"{qt}_to_p64"]["matrix_4x4"]) for qt in qts},
+        )
+    )
+    for name, reference, targets, truths in rigs:
+        rig = lidarcal.calibrate_rig(reference, targets, method="targetless", require_all=False)
+        edges = ", ".join(f"{e.a}-{e.b}" for e in rig.edges)
+        for target, truth in truths.items():
+            if target not in rig.transforms:
+                print(f"| {name} | {target} | - | - | unconnected |")
+                continue
+            a, t = errors(truth, rig.transforms[target])
+            print(f"| {name} | {target} | {a:.3f} | {t:.3f} | {edges} |")
 
 
 if __name__ == "__main__":
