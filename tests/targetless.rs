@@ -30,6 +30,7 @@ fn street(seed: u64, side: Side) -> (f64, f64) {
             "planes",
             "hypotheses",
             "normals",
+            "slides",
             "verify",
             "refine",
             "icp",
@@ -51,6 +52,42 @@ fn tilted_side_units_on_a_street_without_initial_guess() {
             angle.to_degrees()
         );
     }
+}
+
+#[test]
+fn a_unit_three_metres_back_is_found_by_sliding_a_plane_pair() {
+    // With two planes per cloud (the road and one facade) every hypothesis is a pair: the
+    // translation along the street starts at zero, 3 m from the truth. Only the slid copy of the
+    // pair starts within ICP's reach; before it, this scene verified the 180-degree turn.
+    let scene = street_scene(&StreetOptions {
+        seed: 1,
+        side: Side::Left,
+        target_offset: -3.0,
+        ..StreetOptions::default()
+    })
+    .unwrap();
+    let options = TargetlessOptions {
+        max_planes: 2,
+        ..TargetlessOptions::default()
+    };
+    let r = calibrate_targetless(
+        &scene.reference.positions(),
+        &scene.target.positions(),
+        &options,
+    )
+    .unwrap();
+    assert!(!r.triplet && !r.sweep);
+    let (angle, distance) = pose_error(&scene.reference_from_target, &r.reference_from_target);
+    assert!(
+        angle.to_degrees() < 0.1 && distance < 0.02,
+        "{:.3} deg {distance:.3} m",
+        angle.to_degrees()
+    );
+    assert!(street_scene(&StreetOptions {
+        target_offset: 6.0,
+        ..StreetOptions::default()
+    })
+    .is_err());
 }
 
 #[test]

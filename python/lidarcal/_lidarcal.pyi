@@ -454,6 +454,7 @@ def sim_street_scene(
     clutter: bool = True,
     cross_wall: bool = False,
     noise: float | None = None,
+    target_offset: float = 0.0,
 ) -> Scene: ...
 def sim_corridor_scene(*, seed: int = 0) -> Scene: ...
 def sim_paper_scene(

@@ -222,10 +222,13 @@ def street_scene(
     clutter: bool = True,
     cross_wall: bool = False,
     noise: float | None = None,
+    target_offset: float = 0.0,
 ) -> Scene:
     """A street (road, kerbs, pavements, facades with gaps; parked cars, trees and poles with
     ``clutter``) scanned by a roof HDL-64E (the reference) and a wide-angle side unit tilted
-    ``target_tilt_deg`` down on the ``side`` ("left" or "right"), as on the real road rigs."""
+    ``target_tilt_deg`` down on the ``side`` ("left" or "right"), as on the real road rigs.
+    ``target_offset`` (metres, in [-5, 5]) moves the side unit along the vehicle (-3: at the back
+    of a car), where the street's own planes no longer fix its position."""
     if side not in ("left", "right"):
         raise ValueError(f"side must be 'left' or 'right', got {side!r}")
     return sim_street_scene(
@@ -235,6 +238,7 @@ def street_scene(
         clutter=clutter,
         cross_wall=cross_wall,
         noise=noise,
+        target_offset=target_offset,
     )
 
 

@@ -22,11 +22,16 @@
 //!    **Ground sweep** ([`TargetlessOptions::ground_sweep`]): the largest plane of each cloud (the
 //!    road) levelled onto the other's and turned about its normal in [`SWEEP_STEP`] steps, the
 //!    in-plane translation left to ICP; this covers scenes that share no plane pair.
+//!    **Slides**: a pair hypothesis starts at the minimum-norm translation, which is as far from
+//!    the truth along the free direction as the sensors are apart along it (3 m for a unit at the
+//!    back of a car) and beyond the reach of ICP. Each of the best pair hypotheses also gets a
+//!    slid copy, moved along its free direction by the multiple of [`SLIDE_STEP`] whose sampled
+//!    points agree best with the reference (and violate its free space least).
 //! 4. **Verification.** Pair hypotheses are deduplicated (1 degree, 10 cm) and ranked by the
 //!    planes they bring into agreement (a target plane agrees with a reference plane when their
 //!    normals are within the tolerance and, where the hypothesis fixes it, their offsets within
 //!    [`TargetlessOptions::offset_tolerance`]), weighted by inliers. The best
-//!    [`TargetlessOptions::max_verified`] and the sweep hypotheses are screened (a quick ICP and
+//!    [`TargetlessOptions::max_verified`], their slid copies and the sweep hypotheses are screened (a quick ICP and
 //!    score), and the best [`SCREEN_KEEP`] distinct ones get a longer ICP and the full score: the
 //!    share of target points within [`VERIFY_DISTANCE`] of a reference point minus
 //!    [`VIOLATION_WEIGHT`] times the free-space violations both ways ([`crate::visibility`]:
@@ -46,7 +51,8 @@
 //!    without ICP) must hold at least [`TargetlessOptions::min_information_share`] of it. A
 //!    corridor (floor and parallel walls) has none along its axis and is refused with that
 //!    direction named; so is a pose that only planes constrain when their normals span fewer than
-//!    three directions.
+//!    three directions. It is also refused when ICP carried the target beyond
+//!    [`TargetlessOptions::max_translation`], where no hypothesis started.
 //!
 //! # Limits
 //! * Both sensors must see at least two common non-parallel planes (the ground and one facade
@@ -71,6 +77,8 @@
 //! assert!(error.rotation.angle() < 0.005 && error.translation.vector.norm() < 0.05);
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
+
+use std::collections::HashSet;
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
@@ -119,6 +127,16 @@ pub const VIOLATION_WEIGHT: f64 = 3.0;
 pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
 /// Largest planes of the target tried as the reference's largest plane in the ground sweep.
 pub const SWEEP_TARGET_PLANES: usize = 1;
+/// Step (metres) of the slide of a plane-pair hypothesis along the direction its planes leave
+/// free (the axis of a street): see [`calibrate_targetless`], step 4.
+pub const SLIDE_STEP: f64 = 0.5;
+/// A slid target point agrees when it lands in a cell of this side (metres) that holds a reference
+/// point: as coarse as the step, so the best offset is found before any ICP.
+pub const SLIDE_CELL: f64 = 0.5;
+/// Target points (at most, by a fixed stride) scored at every slide offset.
+pub const SLIDE_SAMPLES: usize = 400;
+/// Offsets closer than this to the hypothesis' own (metres) are left to its screening ICP.
+pub const SLIDE_MIN: f64 = 0.75;
 /// Target points (at most, by a fixed stride) scored in the screening of every hypothesis.
 pub const SCREEN_SAMPLES: usize = 300;
 /// Reference points (at most, by a fixed stride) checked against the target's free space in the
@@ -903,6 +921,99 @@ fn ground_sweep(reference: &[PlaneFeature], target: &[PlaneFeature]) -> Vec<Cand
     out
 }
 
+/// The cells of a cubic grid that hold at least one point: a coarse, constant-time "is there a
+/// point near here" for the slide search.
+struct Occupancy {
+    cell: f64,
+    cells: HashSet<[i64; 3]>,
+}
+
+impl Occupancy {
+    fn key(cell: f64, p: &Point3<f64>) -> [i64; 3] {
+        // Inputs are bounded by MAX_COORDINATE; beyond i64 a float-to-int cast saturates.
+        [
+            (p.x / cell).floor() as i64,
+            (p.y / cell).floor() as i64,
+            (p.z / cell).floor() as i64,
+        ]
+    }
+
+    fn new(points: &[Point3<f64>], cell: f64) -> Self {
+        let cells = points.iter().map(|p| Self::key(cell, p)).collect();
+        Occupancy { cell, cells }
+    }
+
+    fn share(&self, points: &[Point3<f64>]) -> f64 {
+        let hits = points
+            .iter()
+            .filter(|p| self.cells.contains(&Self::key(self.cell, p)))
+            .count();
+        hits as f64 / points.len().max(1) as f64
+    }
+}
+
+/// The slid copy of each plane-pair hypothesis (step 3 of the module docs): the pose moved along
+/// its free direction by the multiple of [`SLIDE_STEP`] (at least [`SLIDE_MIN`] away, within
+/// `max_translation`) that scores best: the share of sampled target points that land in a
+/// [`SLIDE_CELL`] cell holding a reference point, minus [`VIOLATION_WEIGHT`] times the share that
+/// lands in space the reference saw through. A pair fixes the translation only across the
+/// street; its minimum-norm start is as far from the truth as the sensors are apart along it,
+/// beyond the reach of ICP.
+fn slides(
+    candidates: &[Candidate],
+    reference: &Occupancy,
+    image: &RangeImage,
+    samples: &[Point3<f64>],
+    max_translation: f64,
+) -> Vec<Candidate> {
+    let best_slide = |c: &Candidate| -> Option<Candidate> {
+        let free = c.free?;
+        let t = c.pose.translation.vector;
+        let steps = (2.0 * max_translation / SLIDE_STEP).ceil() as i64;
+        let mut best: Option<(f64, f64)> = None;
+        for k in -steps..=steps {
+            let offset = k as f64 * SLIDE_STEP;
+            if offset.abs() < SLIDE_MIN || (t + free * offset).norm() > max_translation {
+                continue;
+            }
+            let pose = Translation3::from(free * offset) * c.pose;
+            let agreement = reference.share(&mapped(samples, &pose));
+            let violations = image.count_violations(samples, &pose) as f64;
+            let score = agreement - VIOLATION_WEIGHT * violations / samples.len().max(1) as f64;
+            if best.is_none_or(|(_, b)| score > b) {
+                best = Some((offset, score));
+            }
+        }
+        let (offset, _) = best?;
+        Some(Candidate {
+            pose: Translation3::from(free * offset) * c.pose,
+            ..*c
+        })
+    };
+    let slid: Vec<Candidate> = {
+        #[cfg(feature = "parallel")]
+        {
+            use rayon::prelude::*;
+            candidates.par_iter().filter_map(best_slide).collect()
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            candidates.iter().filter_map(best_slide).collect()
+        }
+    };
+    // Pair hypotheses that differ only along their free direction slide to the same pose.
+    let mut distinct: Vec<Candidate> = Vec::with_capacity(slid.len());
+    for c in slid {
+        if !distinct
+            .iter()
+            .any(|d| same_pose(&d.pose, &c.pose, DUPLICATE_ANGLE, DUPLICATE_DISTANCE))
+        {
+            distinct.push(c);
+        }
+    }
+    distinct
+}
+
 /// Options of the quick ICP of the screening (the first stage of the verification), for a
 /// plane-pair hypothesis or a ground-sweep one (wider first distance: the start is up to half a
 /// step of yaw and the in-plane translation away).
@@ -1054,10 +1165,19 @@ pub fn calibrate_targetless(
             .ok()
             .map(|r| score(r.pose, samples))
     };
-    let chosen: Vec<Candidate> = candidates
+    let paired = &candidates[..candidates.len().min(options.max_verified)];
+    let slid = slides(
+        paired,
+        &Occupancy::new(&reference_ds.points, SLIDE_CELL),
+        &reference_image,
+        &sample(&target_ds.points, SLIDE_SAMPLES),
+        options.max_translation,
+    );
+    clock.lap("slides");
+    let chosen: Vec<Candidate> = paired
         .iter()
-        .take(options.max_verified)
         .chain(sweep.iter())
+        .chain(slid.iter())
         .copied()
         .collect();
     let (screen_pair, screen_sweep, short) = (
@@ -1278,6 +1398,15 @@ pub fn calibrate_targetless(
             fmt(&weakest_rotation.0),
             100.0 * weakest_rotation.1,
             100.0 * options.min_information_share
+        )));
+    }
+    let moved = pose.translation.vector.norm();
+    if moved > options.max_translation {
+        return Err(Error::Calibration(format!(
+            "the best pose puts the target {moved:.2} m from the reference, beyond \
+             max_translation ({:.2} m): every hypothesis started within it and ICP carried the \
+             target away (the clouds agree best where the sensors cannot be)",
+            options.max_translation
         )));
     }
 

@@ -427,8 +427,10 @@ fn sim_corner_scene<'py>(
 }
 
 /// The street scene: a roof HDL-64E (reference) and a tilted wide-angle side unit (target).
+// One argument per keyword of `lidarcal.sim.street_scene`.
+#[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (*, seed=0, side="left", target_tilt_deg=45.0, clutter=true, cross_wall=false, noise=None))]
+#[pyo3(signature = (*, seed=0, side="left", target_tilt_deg=45.0, clutter=true, cross_wall=false, noise=None, target_offset=0.0))]
 fn sim_street_scene(
     py: Python<'_>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
@@ -437,6 +439,7 @@ fn sim_street_scene(
     clutter: bool,
     cross_wall: bool,
     noise: Option<f64>,
+    target_offset: f64,
 ) -> PyResult<Scene> {
     let side = match side {
         "left" => Side::Left,
@@ -454,6 +457,7 @@ fn sim_street_scene(
         clutter,
         cross_wall,
         range_noise: noise,
+        target_offset,
     };
     let inner = run(py, move || street_scene(&options))?;
     Ok(Scene {

@@ -754,6 +754,9 @@ pub struct StreetOptions {
     pub cross_wall: bool,
     /// Range noise (metres, 1 sigma) of both sensors; `None` uses each model's default.
     pub range_noise: Option<f64>,
+    /// Extra position of the target unit along the vehicle (metres, forward positive; e.g. -3
+    /// for a unit at the back of a car), on top of the small random one. In `[-5, 5]`.
+    pub target_offset: f64,
 }
 
 impl Default for StreetOptions {
@@ -765,6 +768,7 @@ impl Default for StreetOptions {
             clutter: true,
             cross_wall: false,
             range_noise: None,
+            target_offset: 0.0,
         }
     }
 }
@@ -783,6 +787,12 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
         return Err(Error::InvalidInput(format!(
             "target_tilt_deg must be in [0, 80], got {}",
             options.target_tilt_deg
+        )));
+    }
+    if !(options.target_offset.is_finite() && options.target_offset.abs() <= 5.0) {
+        return Err(Error::InvalidInput(format!(
+            "target_offset must be in [-5, 5] m, got {}",
+            options.target_offset
         )));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
@@ -884,7 +894,7 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
     let mount_error = 3f64.to_radians();
     let reference_from_target = pose(
         Vector3::new(
-            uniform(&mut rng, -0.2, 0.2),
+            uniform(&mut rng, -0.2, 0.2) + options.target_offset,
             side_sign * uniform(&mut rng, 0.45, 0.65),
             -uniform(&mut rng, 0.3, 0.5),
         ),
