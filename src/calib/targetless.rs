@@ -31,8 +31,8 @@
 //!    planes they bring into agreement (a target plane agrees with a reference plane when their
 //!    normals are within the tolerance and, where the hypothesis fixes it, their offsets within
 //!    [`TargetlessOptions::offset_tolerance`]), weighted by inliers. The best
-//!    [`TargetlessOptions::max_verified`], their slid copies and the sweep hypotheses are screened (a quick ICP and
-//!    score), and the best [`SCREEN_KEEP`] distinct ones get a longer ICP and the full score: the
+//!    [`TargetlessOptions::max_verified`], their slid copies and the sweep hypotheses are
+//!    screened (a quick ICP and score), and the best [`SCREEN_KEEP`] distinct ones get a longer ICP and the full score: the
 //!    share of target points within [`VERIFY_DISTANCE`] of a reference point minus
 //!    [`VIOLATION_WEIGHT`] times the free-space violations both ways ([`crate::visibility`]:
 //!    points that land in space the other sensor saw through). Point agreement alone prefers the
@@ -128,8 +128,11 @@ pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
 /// Largest planes of the target tried as the reference's largest plane in the ground sweep.
 pub const SWEEP_TARGET_PLANES: usize = 1;
 /// Step (metres) of the slide of a plane-pair hypothesis along the direction its planes leave
-/// free (the axis of a street): see [`calibrate_targetless`], step 4.
+/// free (the axis of a street): see the module docs, step 3.
 pub const SLIDE_STEP: f64 = 0.5;
+/// Farthest a hypothesis slides (metres) when [`TargetlessOptions::max_translation`] is larger
+/// (or infinite).
+pub const SLIDE_RANGE: f64 = 10.0;
 /// A slid target point agrees when it lands in a cell of this side (metres) that holds a reference
 /// point: as coarse as the step, so the best offset is found before any ICP.
 pub const SLIDE_CELL: f64 = 0.5;
@@ -953,8 +956,8 @@ impl Occupancy {
 }
 
 /// The slid copy of each plane-pair hypothesis (step 3 of the module docs): the pose moved along
-/// its free direction by the multiple of [`SLIDE_STEP`] (at least [`SLIDE_MIN`] away, within
-/// `max_translation`) that scores best: the share of sampled target points that land in a
+/// its free direction by the multiple of [`SLIDE_STEP`] (at least [`SLIDE_MIN`] and at most
+/// [`SLIDE_RANGE`] away, within `max_translation`) that scores best: the share of sampled target points that land in a
 /// [`SLIDE_CELL`] cell holding a reference point, minus [`VIOLATION_WEIGHT`] times the share that
 /// lands in space the reference saw through. A pair fixes the translation only across the
 /// street; its minimum-norm start is as far from the truth as the sensors are apart along it,
@@ -969,7 +972,7 @@ fn slides(
     let best_slide = |c: &Candidate| -> Option<Candidate> {
         let free = c.free?;
         let t = c.pose.translation.vector;
-        let steps = (2.0 * max_translation / SLIDE_STEP).ceil() as i64;
+        let steps = (max_translation.min(SLIDE_RANGE) / SLIDE_STEP).ceil() as i64;
         let mut best: Option<(f64, f64)> = None;
         for k in -steps..=steps {
             let offset = k as f64 * SLIDE_STEP;

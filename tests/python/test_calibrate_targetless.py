@@ -199,6 +199,16 @@ def test_pose_beyond_max_translation_is_refused() -> None:
     assert angle < 0.1 and dist < 0.02, (angle, dist)
 
 
+def test_infinite_max_translation_bounds_the_slide() -> None:
+    # max_translation=inf keeps every hypothesis; the slide still stops at SLIDE_RANGE (10 m).
+    scene = sim.street_scene(seed=0, side="left", target_offset=-3.0)
+    result = lidarcal.calibrate_targetless(
+        scene.reference, scene.target, max_translation=float("inf"), max_planes=2
+    )
+    angle, dist = errors(scene.reference_from_target, result.transform)
+    assert angle < 0.1 and dist < 0.02, (angle, dist)
+
+
 def test_street_target_offset_is_checked() -> None:
     with pytest.raises(ValueError, match="target_offset"):
         sim.street_scene(target_offset=6.0)
