@@ -184,7 +184,7 @@ def test_unit_along_the_vehicle_found_by_the_slide(seed: int, side: str, offset:
     assert angle < 0.1 and dist < 0.02, (angle, dist)
 
 
-def test_pose_beyond_max_translation_is_refused() -> None:
+def test_pose_beyond_max_translation_is_never_returned() -> None:
     # Street 6, right unit 1 m forward: that street barely pins the translation along it (at
     # offset 0 it is refused as unobservable), and here a pose 118 deg and 6.3 m off agrees
     # better than the truth. ICP carried it beyond max_translation, where no hypothesis started:
