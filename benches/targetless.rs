@@ -1,6 +1,7 @@
 //! Criterion bench of the targetless method: one calibration of a real road pair (the 64-beam
 //! roof unit against a 45-degree-tilted side unit, ~90k and ~9k points) when ../shared is
-//! present, and of a simulated street pair. The per-stage breakdown of one run is printed first.
+//! present, the largest hesai pair (P64 against qt_204, ~106k and ~25k points), and a simulated
+//! street pair. The per-stage breakdown of one run is printed first.
 //! Run with `cargo bench --bench targetless`.
 
 #[path = "../tests/common/mod.rs"]
@@ -41,6 +42,13 @@ fn bench_targetless(c: &mut Criterion) {
         stages("real left->top", &top, &left);
         c.bench_function("targetless real left->top (92k + 9k points)", |b| {
             b.iter(|| calibrate_targetless(black_box(&top), black_box(&left), &options))
+        });
+        let hesai = dir.join("hesai_scene1");
+        let p64 = common::load_npy_xyz(&hesai.join("p64.npy"));
+        let qt = common::load_npy_xyz(&hesai.join("qt_204.npy"));
+        stages("hesai qt_204->p64", &p64, &qt);
+        c.bench_function("targetless hesai qt_204->p64 (106k + 25k points)", |b| {
+            b.iter(|| calibrate_targetless(black_box(&p64), black_box(&qt), &options))
         });
     }
     let scene = street_scene(&StreetOptions::default()).unwrap_or_else(|e| panic!("{e}"));
