@@ -65,7 +65,13 @@ from lidarcal._lidarcal import (
     so3_log,
     write_points,
 )
-from lidarcal.calibrate import RigCalibration, RigEdge, calibrate, calibrate_rig
+from lidarcal.calibrate import (
+    RigCalibration,
+    RigEdge,
+    calibrate,
+    calibrate_rig,
+    refine_pose_graph,
+)
 
 __all__ = [
     "CalibrationError",
@@ -90,6 +96,7 @@ __all__ = [
     "read_points",
     "refine_point_to_line",
     "refine_point_to_plane",
+    "refine_pose_graph",
     "se3_exp",
     "se3_log",
     "sim",

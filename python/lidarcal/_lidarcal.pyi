@@ -190,6 +190,35 @@ def calibrate_targetless(
 def overlap(
     reference: ArrayLike, target: ArrayLike, transform: ArrayLike, distance: float = 0.25
 ) -> float: ...
+
+AGREEMENT_DISTANCE: float
+AUTO_TIE: float
+MIN_PAIR_OVERLAP: float
+
+def calibrate_auto(
+    reference: ArrayLike,
+    target: ArrayLike,
+    *,
+    seed: int = 0,
+    up: ArrayLike | None = None,
+    distance_threshold: float | None = None,
+    intensity_threshold: float | None = None,
+    vendor: str | None = None,
+) -> CalibrationResult: ...
+def calibrate_rig(
+    reference: ArrayLike,
+    targets: list[tuple[str, ArrayLike]],
+    *,
+    method: str = "auto",
+    pairwise: bool = True,
+    require_all: bool = True,
+    seed: int = 0,
+) -> dict[str, Any]: ...
+def refine_pose_graph(
+    poses: list[F64Array],
+    edges: list[tuple[int, int, F64Array, F64Array]],
+    iterations: int = 20,
+) -> list[F64Array]: ...
 def calibrate_planes(
     reference: ArrayLike,
     target: ArrayLike,

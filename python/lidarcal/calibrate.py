@@ -5,6 +5,10 @@
   which most target points land on the reference cloud; ``result.method`` says which.
 * :func:`calibrate_rig` -- every target to the reference, every pair of targets that overlaps,
   and a small pose-graph refinement that makes the set consistent.
+* :func:`refine_pose_graph` -- that refinement on poses and edges of your own.
+
+The work is in the Rust crate (``lidarcal::calib::rig``), with the GIL released; this module
+checks arguments and builds the result objects.
 """
 
 from __future__ import annotations
@@ -16,15 +20,12 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from lidarcal import _lidarcal
 from lidarcal._lidarcal import (
-    CalibrationError,
     CalibrationResult,
     calibrate_planes,
     calibrate_poles,
     calibrate_targetless,
-    overlap,
-    se3_exp,
-    se3_log,
 )
 
 Method = Literal["auto", "planes", "targetless", "poles"]
@@ -33,15 +34,15 @@ F64Array = npt.NDArray[np.float64]
 
 #: Distance (m) within which a mapped target point counts as agreeing with the reference cloud
 #: when ``method="auto"`` compares the methods' results.
-AGREEMENT_DISTANCE = 0.25
+AGREEMENT_DISTANCE: float = _lidarcal.AGREEMENT_DISTANCE
 
 #: ``method="auto"`` prefers the earlier method (corner, targetless, poles) when its agreement is
 #: within this fraction of the best.
-AUTO_TIE = 0.01
+AUTO_TIE: float = _lidarcal.AUTO_TIE
 
 #: A target pair is calibrated directly in :func:`calibrate_rig` only when the result brings at
 #: least this fraction of its points onto the other cloud.
-MIN_PAIR_OVERLAP = 0.2
+MIN_PAIR_OVERLAP: float = _lidarcal.MIN_PAIR_OVERLAP
 
 
 def _cloud(points: npt.ArrayLike, name: str) -> F64Array:
@@ -91,34 +92,15 @@ def calibrate(
         raise ValueError(
             f"method must be 'auto', 'planes', 'targetless' or 'poles', got {method!r}"
         )
-    tried: list[tuple[str, CalibrationResult | str]] = []
-    candidates: list[str] = ["planes", "targetless"]
-    if ref.shape[1] == 4 and tgt.shape[1] == 4:
-        candidates.append("poles")
-    for name in candidates:
-        try:
-            result = calibrate(
-                ref,
-                tgt,
-                name,  # type: ignore[arg-type]
-                seed=seed,
-                up=up,
-                distance_threshold=distance_threshold,
-                intensity_threshold=intensity_threshold,
-                vendor=vendor,
-            )
-            tried.append((name, result))
-        except CalibrationError as e:
-            tried.append((name, str(e)))
-    results = [(n, r) for n, r in tried if isinstance(r, CalibrationResult)]
-    if not results:
-        reasons = "; ".join(f"{n}: {r}" for n, r in tried)
-        raise CalibrationError(f"no method calibrated this pair ({reasons})")
-    scores = [overlap(ref, tgt, r.transform, AGREEMENT_DISTANCE) for _, r in results]
-    # Within AUTO_TIE of the best, the earlier (more specific) method wins: a 25 cm agreement
-    # cannot tell a corner calibration from a whole-scene one that is 0.2 deg different.
-    best = max(scores)
-    return next(r for (_, r), s in zip(results, scores, strict=True) if s >= best - AUTO_TIE)
+    return _lidarcal.calibrate_auto(
+        ref,
+        tgt,
+        seed=seed,
+        up=up,
+        distance_threshold=distance_threshold,
+        intensity_threshold=intensity_threshold,
+        vendor=vendor,
+    )
 
 
 @dataclass(frozen=True)
@@ -151,60 +133,34 @@ class RigCalibration:
     unconnected: list[str] = field(default_factory=list)
 
 
-def _edge_error(a_from_b: F64Array, ref_from_a: F64Array, ref_from_b: F64Array) -> F64Array:
-    """Tangent of the disagreement between a measured edge and the rig's poses."""
-    predicted = np.linalg.inv(ref_from_a) @ ref_from_b
-    return np.asarray(se3_log(np.linalg.inv(a_from_b) @ predicted), dtype=np.float64)
-
-
-def _refine_graph(
-    poses: dict[str, F64Array],
-    edges: Sequence[tuple[str, str, F64Array, F64Array]],
+def refine_pose_graph(
+    poses: npt.ArrayLike,
+    edges: Sequence[tuple[int, int, npt.ArrayLike, npt.ArrayLike]],
     iterations: int = 20,
-) -> dict[str, F64Array]:
-    """Gauss-Newton on the pose graph: the reference is fixed at the identity; each edge
-    ``(a, b, a_from_b, information)`` contributes ``e^T W e`` with ``e`` its tangent error."""
-    names = [n for n in poses if n != "reference"]
-    if not names:
-        return dict(poses)
-    current = {n: p.copy() for n, p in poses.items()}
-    h = 1e-6
-    for _ in range(iterations):
-        size = 6 * len(names)
-        hessian = np.zeros((size, size))
-        gradient = np.zeros(size)
-        for a, b, z, w in edges:
-            e0 = _edge_error(z, current[a], current[b])
-            jac = np.zeros((6, size))
-            for k, name in enumerate(names):
-                if name not in (a, b):
-                    continue
-                for d in range(6):
-                    delta = np.zeros(6)
-                    delta[d] = h
-                    moved = dict(current)
-                    moved[name] = se3_exp(delta) @ current[name]
-                    e1 = _edge_error(z, moved[a], moved[b])
-                    jac[:, 6 * k + d] = (e1 - e0) / h
-            hessian += jac.T @ w @ jac
-            gradient += jac.T @ w @ e0
-        step = -np.linalg.solve(hessian + 1e-9 * np.eye(size), gradient)
-        for k, name in enumerate(names):
-            current[name] = se3_exp(step[6 * k : 6 * k + 6]) @ current[name]
-        if np.linalg.norm(step) < 1e-10:
-            break
-    return current
+) -> F64Array:
+    """Refines a pose graph whose node 0 (the reference) is fixed.
 
-
-def _information(result: CalibrationResult) -> F64Array:
-    """Edge weight: the inverse covariance when the method gives one, else 1 cm / 0.1 deg."""
-    default = np.diag([1e4] * 3 + [1.0 / np.radians(0.1) ** 2] * 3)
-    cov = result.covariance
-    if cov is None or not np.all(np.isfinite(cov)):
-        return default
-    # Floor the variances (1 mm, 0.01 deg): a covariance from thousands of points is optimistic.
-    floor = np.diag([1e-6] * 3 + [np.radians(0.01) ** 2] * 3)
-    return np.asarray(np.linalg.inv(cov + floor), dtype=np.float64)
+    ``poses`` is a ``(K, 4, 4)`` stack of ``reference_from_node``; each edge
+    ``(a, b, a_from_b, information)`` is a measured transform between nodes ``a`` and ``b`` with
+    its ``(6, 6)`` information matrix (inverse covariance of the tangent ``[rho, phi]``).
+    Minimises the sum of ``e^T W e`` with ``e = log(a_from_b^-1 a^-1 b)`` by Gauss-Newton and
+    returns the refined ``(K, 4, 4)`` stack, node 0 unchanged. Raises ``ValueError`` for an edge
+    naming a missing node, a node in no edge, or a malformed matrix.
+    """
+    stack = np.asarray(poses, dtype=np.float64)
+    if stack.ndim != 3 or stack.shape[1:] != (4, 4):
+        raise ValueError(f"poses must have shape (K, 4, 4), got {stack.shape}")
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
+        raise ValueError(f"iterations must be a non-negative integer, got {iterations!r}")
+    refined = _lidarcal.refine_pose_graph(
+        list(stack),
+        [
+            (int(a), int(b), np.asarray(z, dtype=np.float64), np.asarray(w, dtype=np.float64))
+            for a, b, z, w in edges
+        ],
+        iterations,
+    )
+    return np.stack(refined) if refined else np.zeros((0, 4, 4))
 
 
 def calibrate_rig(
@@ -236,73 +192,32 @@ def calibrate_rig(
         clouds = {f"target{i}": _cloud(v, f"target{i}") for i, v in enumerate(targets)}
     if not clouds:
         raise ValueError("targets is empty")
-    if "reference" in clouds:
-        raise ValueError("'reference' is reserved for the reference sensor; rename that target")
-    measured: list[tuple[str, str, CalibrationResult]] = []
-    failures: dict[tuple[str, str], str] = {}
-    direct: dict[str, F64Array] = {}
-    for name, cloud in clouds.items():
-        try:
-            r = calibrate(ref, cloud, method, seed=seed)
-            measured.append(("reference", name, r))
-            direct[name] = r.transform
-        except CalibrationError as e:
-            failures[("reference", name)] = str(e)
-    names = list(clouds)
-    if pairwise:
-        for i, a in enumerate(names):
-            for b in names[i + 1 :]:
-                try:
-                    r = calibrate(clouds[a], clouds[b], method, seed=seed)
-                except CalibrationError as e:
-                    failures[(a, b)] = str(e)
-                    continue
-                if (
-                    overlap(clouds[a], clouds[b], r.transform, AGREEMENT_DISTANCE)
-                    < MIN_PAIR_OVERLAP
-                ):
-                    failures[(a, b)] = "the two units barely overlap under the result"
-                    continue
-                measured.append((a, b, r))
-    # Initial poses: breadth-first from the reference over the measured edges.
-    poses: dict[str, F64Array] = {"reference": np.eye(4)}
-    changed = True
-    while changed:
-        changed = False
-        for a, b, r in measured:
-            if a in poses and b not in poses:
-                poses[b] = poses[a] @ r.transform
-                changed = True
-            elif b in poses and a not in poses:
-                poses[a] = poses[b] @ np.linalg.inv(r.transform)
-                changed = True
-    missing = [n for n in names if n not in poses]
-    if missing and (require_all or len(poses) == 1):
-        reasons = "; ".join(f"{a}->{b}: {m}" for (a, b), m in failures.items())
-        raise CalibrationError(
-            f"could not connect {', '.join(missing)} to the reference ({reasons})"
+    if method not in ("auto", "planes", "targetless", "poles"):
+        raise ValueError(
+            f"method must be 'auto', 'planes', 'targetless' or 'poles', got {method!r}"
         )
-    # Edges between targets that nothing connects to the reference cannot be placed.
-    measured = [(a, b, r) for a, b, r in measured if a in poses and b in poses]
-    graph = [(a, b, r.transform, _information(r)) for a, b, r in measured]
-    refined = _refine_graph(poses, graph)
-    edges = []
-    for a, b, r in measured:
-        err = _edge_error(r.transform, refined[a], refined[b])
-        edges.append(
+    out = _lidarcal.calibrate_rig(
+        ref,
+        list(clouds.items()),
+        method=method,
+        pairwise=pairwise,
+        require_all=require_all,
+        seed=seed,
+    )
+    return RigCalibration(
+        transforms=dict(out["transforms"]),
+        direct=dict(out["direct"]),
+        edges=[
             RigEdge(
                 a=a,
                 b=b,
-                method=r.method,
-                a_from_b=r.transform,
-                rotation_residual_deg=float(np.degrees(np.linalg.norm(err[3:]))),
-                translation_residual_m=float(np.linalg.norm(err[:3])),
+                method=m,
+                a_from_b=z,
+                rotation_residual_deg=rot,
+                translation_residual_m=trans,
             )
-        )
-    return RigCalibration(
-        transforms={n: refined[n] for n in names if n in refined},
-        direct=direct,
-        edges=edges,
-        failures=failures,
-        unconnected=missing,
+            for a, b, m, z, rot, trans in out["edges"]
+        ],
+        failures=dict(out["failures"]),
+        unconnected=list(out["unconnected"]),
     )

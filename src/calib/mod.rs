@@ -7,9 +7,12 @@
 //! * [`targetless`]: the planes of an ordinary scene (a street), matched by plane pairs and
 //!   triplets without an initial guess, verified and refined by point-to-plane ICP; refuses
 //!   scenes that leave a degree of freedom unobserved.
+//! * [`rig`]: one entry point over the three ([`rig::Method::Auto`] keeps the best-fitting
+//!   result) and the calibration of a whole rig, made consistent by a small pose graph.
 
 pub mod planes;
 pub mod poles;
+pub mod rig;
 pub mod targetless;
 
 use std::time::Instant;

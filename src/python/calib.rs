@@ -15,6 +15,7 @@ use crate::calib::planes::{
 use crate::calib::poles::{
     calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
 };
+use crate::calib::rig::{self, Calibration, Cloud, Method, MethodOptions, RigOptions};
 use crate::calib::targetless::{
     calibrate_targetless as rs_calibrate_targetless, TargetlessCalibration, TargetlessOptions,
 };
@@ -22,12 +23,8 @@ use crate::calib::Timings;
 use crate::geometry::Plane;
 use crate::lm::{LmOptions, LmReport, Loss};
 
-/// What a calibration method returned.
-enum Inner {
-    Planes(Box<PlanarCalibration>),
-    Poles(Box<PoleCalibration>),
-    Targetless(Box<TargetlessCalibration>),
-}
+/// What a calibration method returned (the crate's own sum of the three results).
+type Inner = Calibration;
 
 /// The result of a calibration: `transform` maps target points into the reference frame.
 #[pyclass(frozen, module = "lidarcal", name = "CalibrationResult")]
@@ -129,11 +126,7 @@ impl CalibrationResult {
     /// "planes", "poles" or "targetless".
     #[getter]
     fn method(&self) -> &'static str {
-        match self.inner {
-            Inner::Planes(_) => "planes",
-            Inner::Poles(_) => "poles",
-            Inner::Targetless(_) => "targetless",
-        }
+        self.inner.method().name()
     }
     /// (4, 4) reference_from_target: p_ref = R @ p_tgt + t.
     #[getter]
@@ -744,6 +737,187 @@ fn calibrate_targetless(
     })
 }
 
+/// The options `calibrate(method="auto")` and `calibrate_rig` pass on: `seed` to every method,
+/// `up` to the corner method, `distance_threshold` to the corner and targetless methods,
+/// `intensity_threshold` and `vendor` to the poles.
+fn method_options(
+    seed: u64,
+    up: Option<&Bound<'_, PyAny>>,
+    distance_threshold: Option<f64>,
+    intensity_threshold: Option<f64>,
+    vendor: Option<&str>,
+) -> PyResult<MethodOptions> {
+    let mut o = MethodOptions::with_seed(seed);
+    o.planes.up = up_arg(up)?;
+    o.planes.distance_threshold = distance_threshold;
+    o.targetless.distance_threshold = distance_threshold;
+    o.poles.intensity_threshold = intensity_threshold;
+    o.poles.vendor = vendor.map(Vendor::from_name).transpose()?;
+    Ok(o)
+}
+
+/// Points and, for an (N, 4) array, intensities.
+type OwnedCloud = (Vec<nalgebra::Point3<f64>>, Option<Vec<f64>>);
+
+fn owned_cloud(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<OwnedCloud> {
+    let d = arrays::dense(obj, name)?;
+    if d.shape.len() == 2 && d.shape[1] == 4 {
+        let (p, i) = arrays::points_with_intensity(obj, name)?;
+        Ok((p, Some(i)))
+    } else {
+        Ok((arrays::points(obj, name)?, None))
+    }
+}
+
+fn borrow_cloud(c: &OwnedCloud) -> crate::Result<Cloud<'_>> {
+    match &c.1 {
+        Some(i) => Cloud::with_intensity(&c.0, i),
+        None => Ok(Cloud::new(&c.0)),
+    }
+}
+
+/// calibrate(method="auto") in Rust: the corner method, the targetless method and, when both
+/// clouds are (N, 4), the poles; the result under which most target points lie within 25 cm of a
+/// reference point (within 0.01 of the best, the earlier method wins). Raises CalibrationError
+/// listing each method's reason when none succeeds.
+#[pyfunction]
+#[pyo3(signature = (reference, target, *, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate_auto(
+    py: Python<'_>,
+    reference: &Bound<'_, PyAny>,
+    target: &Bound<'_, PyAny>,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
+    up: Option<&Bound<'_, PyAny>>,
+    distance_threshold: Option<f64>,
+    intensity_threshold: Option<f64>,
+    vendor: Option<&str>,
+) -> PyResult<CalibrationResult> {
+    let options = method_options(seed, up, distance_threshold, intensity_threshold, vendor)?;
+    let reference = owned_cloud(reference, "reference")?;
+    let target = owned_cloud(target, "target")?;
+    let inner = run(py, move || {
+        rig::calibrate(
+            borrow_cloud(&reference)?,
+            borrow_cloud(&target)?,
+            Method::Auto,
+            &options,
+        )
+    })?;
+    Ok(CalibrationResult { inner })
+}
+
+/// The rig calibration in Rust (lidarcal.calibrate_rig wraps it). targets: a list of
+/// (name, cloud). Returns a dict: "transforms" and "direct" ({name: (4, 4)}), "edges" (a list of
+/// (a, b, method, a_from_b, rotation_residual_deg, translation_residual_m)), "failures"
+/// ({(a, b): reason}) and "unconnected" (names).
+#[pyfunction]
+#[pyo3(signature = (reference, targets, *, method="auto", pairwise=true, require_all=true, seed=0))]
+fn calibrate_rig<'py>(
+    py: Python<'py>,
+    reference: &Bound<'py, PyAny>,
+    targets: Vec<(String, Bound<'py, PyAny>)>,
+    method: &str,
+    pairwise: bool,
+    require_all: bool,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let method = Method::from_name(method)?;
+    let reference = owned_cloud(reference, "reference")?;
+    let clouds = targets
+        .iter()
+        .map(|(name, obj)| Ok((name.clone(), owned_cloud(obj, name)?)))
+        .collect::<PyResult<Vec<_>>>()?;
+    let options = RigOptions {
+        method,
+        methods: MethodOptions::with_seed(seed),
+        pairwise,
+        require_all,
+        ..RigOptions::default()
+    };
+    let out = run(py, move || {
+        let borrowed = clouds
+            .iter()
+            .map(|(n, c)| Ok((n.as_str(), borrow_cloud(c)?)))
+            .collect::<crate::Result<Vec<_>>>()?;
+        rig::calibrate_rig(borrow_cloud(&reference)?, &borrowed, &options)
+    })?;
+    let d = PyDict::new(py);
+    let poses = |list: &[(String, Isometry3<f64>)]| -> PyResult<Bound<'py, PyDict>> {
+        let m = PyDict::new(py);
+        for (name, pose) in list {
+            m.set_item(name, matrix4(py, pose)?)?;
+        }
+        Ok(m)
+    };
+    d.set_item("transforms", poses(&out.transforms)?)?;
+    d.set_item("direct", poses(&out.direct)?)?;
+    let edges = out
+        .edges
+        .iter()
+        .map(|e| {
+            Ok((
+                e.a.clone(),
+                e.b.clone(),
+                e.method.name(),
+                matrix4(py, &e.a_from_b)?,
+                e.rotation_residual_deg,
+                e.translation_residual_m,
+            ))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    d.set_item("edges", edges)?;
+    let failures = PyDict::new(py);
+    for f in &out.failures {
+        failures.set_item((f.a.clone(), f.b.clone()), f.reason.clone())?;
+    }
+    d.set_item("failures", failures)?;
+    d.set_item("unconnected", out.unconnected)?;
+    Ok(d)
+}
+
+/// Refines a pose graph whose node 0 is fixed (see lidarcal.refine_pose_graph).
+#[pyfunction]
+#[pyo3(signature = (poses, edges, iterations=20))]
+fn refine_pose_graph<'py>(
+    py: Python<'py>,
+    poses: Vec<Bound<'py, PyAny>>,
+    edges: Vec<(usize, usize, Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+    iterations: usize,
+) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+    let poses = poses
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            Ok(crate::geometry::isometry_from_matrix(&arrays::matrix4(
+                p,
+                &format!("poses[{i}]"),
+            )?)?)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let edges = edges
+        .iter()
+        .enumerate()
+        .map(|(k, (a, b, z, w))| {
+            let z = crate::geometry::isometry_from_matrix(&arrays::matrix4(
+                z,
+                &format!("edges[{k}] a_from_b"),
+            )?)?;
+            let w = arrays::matrix(w, &format!("edges[{k}] information"), 6, 6)?;
+            Ok(rig::PoseGraphEdge {
+                a: *a,
+                b: *b,
+                a_from_b: z,
+                information: nalgebra::Matrix6::from_row_slice(&w),
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let refined = run(py, move || {
+        rig::refine_pose_graph(&poses, &edges, iterations)
+    })?;
+    refined.iter().map(|p| matrix4(py, p)).collect()
+}
+
 /// Fraction of target points that land within `distance` of a reference point under
 /// `transform` (reference_from_target).
 #[pyfunction]
@@ -782,7 +956,13 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate_planes, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_poles, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_targetless, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_auto, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_rig, m)?)?;
+    m.add_function(wrap_pyfunction!(refine_pose_graph, m)?)?;
     m.add_function(wrap_pyfunction!(overlap, m)?)?;
+    m.add("AGREEMENT_DISTANCE", rig::AGREEMENT_DISTANCE)?;
+    m.add("AUTO_TIE", rig::AUTO_TIE)?;
+    m.add("MIN_PAIR_OVERLAP", rig::MIN_PAIR_OVERLAP)?;
     m.add_function(wrap_pyfunction!(rqe, m)?)?;
     Ok(())
 }

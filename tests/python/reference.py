@@ -408,3 +408,44 @@ def planar_pipeline(
         frames += ["target", "reference"]
     refined, _ = solve_planes(np.array(groups_planes), groups_points, frames, initial)
     return initial, refined, np.array(perm)
+
+
+def pose_graph_edge_error(a_from_b: np.ndarray, ref_a: np.ndarray, ref_b: np.ndarray) -> np.ndarray:
+    """Tangent of the disagreement between a measured edge and the poses of its two nodes."""
+    return se3_log(np.linalg.inv(a_from_b) @ np.linalg.inv(ref_a) @ ref_b)
+
+
+def refine_pose_graph(
+    poses: Sequence[np.ndarray],
+    edges: Sequence[tuple[int, int, np.ndarray, np.ndarray]],
+    iterations: int = 20,
+) -> list[np.ndarray]:
+    """Gauss-Newton on a pose graph with node 0 fixed; each edge ``(a, b, a_from_b, W)``
+    contributes ``e^T W e``. Jacobians by forward differences on the left perturbation."""
+    current = [np.array(p, dtype=np.float64) for p in poses]
+    free = len(current) - 1
+    if free <= 0 or not edges:
+        return current
+    h = 1e-6
+    for _ in range(iterations):
+        hessian = np.zeros((6 * free, 6 * free))
+        gradient = np.zeros(6 * free)
+        for a, b, z, w in edges:
+            e0 = pose_graph_edge_error(z, current[a], current[b])
+            jac = np.zeros((6, 6 * free))
+            for node in {a, b} - {0}:
+                for d in range(6):
+                    delta = np.zeros(6)
+                    delta[d] = h
+                    moved = list(current)
+                    moved[node] = se3_exp(delta) @ current[node]
+                    e1 = pose_graph_edge_error(z, moved[a], moved[b])
+                    jac[:, 6 * (node - 1) + d] = (e1 - e0) / h
+            hessian += jac.T @ w @ jac
+            gradient += jac.T @ w @ e0
+        step = -np.linalg.solve(hessian + 1e-9 * np.eye(6 * free), gradient)
+        for node in range(1, len(current)):
+            current[node] = se3_exp(step[6 * (node - 1) : 6 * node]) @ current[node]
+        if np.linalg.norm(step) < 1e-10:
+            break
+    return current
