@@ -6,7 +6,8 @@ Run from the repository root after installing the wheel:
 Prints, for every real_world scene, left->top and right->top against the reference (rotation
 error = angle of R_true R^T, translation error = |t_true - t|), the spread of our own results
 across the three scenes, the four hesai QT units against the P64 (weaker reference), and what
-calibrate_rig (pairwise edges and the pose graph) makes of each real_world scene and of hesai.
+calibrate_rig (pairwise edges and the pose graph) makes of each real_world scene and of hesai,
+and two held-out real pairs never used to tune the method (small_gicp, the RS-16 corner).
 """
 
 from __future__ import annotations
@@ -21,6 +22,53 @@ import numpy as np
 import lidarcal
 
 DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "eval_data" / "SensorsCalibration"
+
+#: The RS-16 corner's reference (data -> ref), from its README (eps_opt.csv).
+RS16_REFERENCE = np.array(
+    [
+        [0.997512, -0.067092, -0.011511, 0.269294],
+        [0.066503, 0.996650, -0.042584, 0.007977],
+        [0.014533, 0.041649, 0.998956, -1.299193],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
+
+
+def held_out(eval_data: Path) -> None:
+    """Real pairs the targetless method was never tuned on."""
+    print()
+    print("Held out (never used for tuning): targetless and auto against the reference")
+    print("| pair | method | rot err (deg) | trans err (m) | time (s) | notes |")
+    print("|---|---|---|---|---|---|")
+    g = eval_data / "small_gicp"
+    source = np.load(g / "source.npy")[:, :3].astype(np.float64)
+    target = np.load(g / "target.npy")[:, :3].astype(np.float64)
+    source = source[np.linalg.norm(source, axis=1) > 0.5]  # invalid returns at the origin
+    target = target[np.linalg.norm(target, axis=1) > 0.5]
+    a = eval_data / "lidar_appearance_calibration"
+    pairs = [
+        ("small_gicp (HDL-32E, two sweeps)", target, source, np.loadtxt(g / "T_target_source.txt")),
+        (
+            "RS-16 corner (top <- front)",
+            np.load(a / "ref_filter.npy").astype(np.float64),
+            np.load(a / "data_filter.npy").astype(np.float64),
+            RS16_REFERENCE,
+        ),
+    ]
+    for name, reference, tgt, truth in pairs:
+        est, note, dt = run(reference, tgt)
+        if est is None:
+            print(f"| {name} | targetless | - | - | {dt:.2f} | {note} |")
+        else:
+            a_err, t_err = errors(truth, est)
+            print(f"| {name} | targetless | {a_err:.3f} | {t_err:.3f} | {dt:.2f} | {note} |")
+        t0 = time.perf_counter()
+        auto = lidarcal.calibrate(reference, tgt)
+        a_err, t_err = errors(truth, auto.transform)
+        print(
+            f"| {name} | auto ({auto.method}) | {a_err:.3f} | {t_err:.3f} | "
+            f"{time.perf_counter() - t0:.2f} | |"
+        )
 
 
 def errors(truth: np.ndarray, est: np.ndarray) -> tuple[float, float]:
@@ -120,6 +168,7 @@ def main() -> None:
                 continue
             a, t = errors(truth, rig.transforms[target])
             print(f"| {name} | {target} | {a:.3f} | {t:.3f} | {edges} |")
+    held_out(base.parent)
 
 
 if __name__ == "__main__":
