@@ -350,9 +350,64 @@ fn a_symmetric_scene_is_refused() {
     let target = scan(&model, &shapes, &pose(10.0, std::f64::consts::PI), &options).unwrap();
     let (r, ri) = split(&reference);
     let (t, ti) = split(&target);
+    // Nothing but the poles: 72 % of the returns are tape, which the default bright-share check
+    // refuses (as for a cloud cropped to the poles, the share limit is lifted).
     let e = calibrate_poles(&r, &ri, &t, &ti, &velodyne()).unwrap_err();
+    assert!(
+        matches!(&e, Error::Calibration(m) if m.contains("max_bright_fraction")),
+        "{e}"
+    );
+    let lifted = PoleOptions {
+        max_bright_fraction: 1.0,
+        ..velodyne()
+    };
+    let e = calibrate_poles(&r, &ri, &t, &ti, &lifted).unwrap_err();
     assert!(
         matches!(&e, Error::Calibration(m) if m.contains("ambiguous pole correspondence")),
         "{e}"
     );
+}
+
+#[test]
+fn a_threshold_that_makes_most_returns_tape_is_refused() {
+    // Threshold 0 on an OS1-128 and a VLP-16 scene: every return is "tape". Before this check
+    // the walls and the ground were fitted as poles and poses 45-180 degrees off came back,
+    // some with ambiguous = false.
+    for (preset, seed) in [(Preset::Os1_128, 2), (Preset::Vlp16, 0)] {
+        let scene = poles_scene(
+            &BeamModel::preset(preset),
+            &PolesOptions {
+                seed,
+                ..PolesOptions::default()
+            },
+        )
+        .unwrap();
+        let everything = PoleOptions {
+            intensity_threshold: Some(0.0),
+            ..PoleOptions::default()
+        };
+        match run(&scene, &everything) {
+            Err(Error::Calibration(m)) => {
+                assert!(m.contains("100.0 % of the returns as tape"), "{m}");
+                assert!(m.contains("data-driven threshold is"), "{m}");
+            }
+            other => panic!("{preset:?}: {other:?}"),
+        }
+        // The data-driven threshold on the same scene still calibrates it.
+        let r = run(&scene, &PoleOptions::default()).unwrap();
+        let (angle, dist) = errors(&scene.reference_from_target, &r);
+        assert!(
+            angle.to_degrees() < 0.5 && dist < 0.05,
+            "{preset:?}: {angle} {dist}"
+        );
+    }
+    let bad = PoleOptions {
+        max_bright_fraction: 0.0,
+        ..PoleOptions::default()
+    };
+    let scene = poles_scene(&vlp16(), &PolesOptions::default()).unwrap();
+    assert!(matches!(
+        run(&scene, &bad),
+        Err(Error::InvalidInput(m)) if m.contains("max_bright_fraction")
+    ));
 }

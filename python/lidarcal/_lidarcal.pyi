@@ -194,6 +194,7 @@ def overlap(
 AGREEMENT_DISTANCE: float
 AUTO_TIE: float
 MIN_PAIR_OVERLAP: float
+MAX_BRIGHT_FRACTION: float
 
 def calibrate_auto(
     reference: ArrayLike,
@@ -204,6 +205,7 @@ def calibrate_auto(
     distance_threshold: float | None = None,
     intensity_threshold: float | None = None,
     vendor: str | None = None,
+    max_bright_fraction: float | None = None,
 ) -> CalibrationResult: ...
 def calibrate_rig(
     reference: ArrayLike,
@@ -246,6 +248,7 @@ def calibrate_poles(
     min_points: int = 15,
     max_iterations: int = 100,
     time_budget_s: float | None = None,
+    max_bright_fraction: float = 0.25,
 ) -> CalibrationResult: ...
 def rqe(points: ArrayLike, sigma: float) -> float: ...
 

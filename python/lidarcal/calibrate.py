@@ -40,6 +40,9 @@ AGREEMENT_DISTANCE: float = _lidarcal.AGREEMENT_DISTANCE
 #: within this fraction of the best.
 AUTO_TIE: float = _lidarcal.AUTO_TIE
 
+#: Default share of a cloud above the intensity threshold beyond which the poles are refused.
+MAX_BRIGHT_FRACTION: float = _lidarcal.MAX_BRIGHT_FRACTION
+
 #: A target pair is calibrated directly in :func:`calibrate_rig` only when the result brings at
 #: least this fraction of its points onto the other cloud.
 MIN_PAIR_OVERLAP: float = _lidarcal.MIN_PAIR_OVERLAP
@@ -62,12 +65,13 @@ def calibrate(
     distance_threshold: float | None = None,
     intensity_threshold: float | None = None,
     vendor: Vendor | None = None,
+    max_bright_fraction: float | None = None,
 ) -> CalibrationResult:
     """Calibrates ``reference_from_target`` with one method, or the best of all for ``"auto"``.
 
     The options go to the methods that take them: ``up`` to the corner method,
-    ``distance_threshold`` to the corner and targetless methods, ``intensity_threshold`` and
-    ``vendor`` to the poles.
+    ``distance_threshold`` to the corner and targetless methods, ``intensity_threshold``,
+    ``vendor`` and ``max_bright_fraction`` to the poles (None: that method's default).
 
     ``"planes"`` is :func:`lidarcal.calibrate_planes` (a wall corner), ``"targetless"``
     :func:`lidarcal.calibrate_targetless` (the planes of any scene, e.g. a street), ``"poles"``
@@ -86,7 +90,14 @@ def calibrate(
         return calibrate_targetless(ref, tgt, seed=seed, distance_threshold=distance_threshold)
     if method == "poles":
         return calibrate_poles(
-            ref, tgt, seed=seed, intensity_threshold=intensity_threshold, vendor=vendor
+            ref,
+            tgt,
+            seed=seed,
+            intensity_threshold=intensity_threshold,
+            vendor=vendor,
+            max_bright_fraction=(
+                MAX_BRIGHT_FRACTION if max_bright_fraction is None else max_bright_fraction
+            ),
         )
     if method != "auto":
         raise ValueError(
@@ -100,6 +111,7 @@ def calibrate(
         distance_threshold=distance_threshold,
         intensity_threshold=intensity_threshold,
         vendor=vendor,
+        max_bright_fraction=max_bright_fraction,
     )
 
 

@@ -316,6 +316,7 @@ def _calibrate(
         distance_threshold=options["threshold"],
         intensity_threshold=options["intensity_threshold"],
         vendor=options["vendor"],
+        max_bright_fraction=options["max_bright_fraction"],
     )
 
 
@@ -404,6 +405,13 @@ def _plot(
     type=click.Choice(["velodyne", "hesai", "leishen", "robosense"]),
     help="poles: take that vendor's tape threshold.",
 )
+@click.option(
+    "--max-bright-fraction",
+    type=click.FloatRange(0.0, 1.0, min_open=True),
+    help="poles: refuse when more than this share of a cloud is at or above the intensity "
+    "threshold (default 0.25; tape is a small part of a scene). Use 1 for clouds cropped to "
+    "the poles.",
+)
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC seed.")
 @click.option("--topic", help="For bags: the PointCloud2 topic (needed if there are several).")
 @click.option(
@@ -440,6 +448,7 @@ def calibrate(
     threshold: float | None,
     intensity_threshold: float | None,
     vendor: str | None,
+    max_bright_fraction: float | None,
     seed: int,
     topic: str | None,
     bag_time: float | None,
@@ -472,6 +481,7 @@ def calibrate(
         "threshold": threshold,
         "intensity_threshold": intensity_threshold,
         "vendor": vendor,
+        "max_bright_fraction": max_bright_fraction,
         "seed": seed,
     }
     if output is not None:

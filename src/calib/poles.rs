@@ -232,7 +232,18 @@ pub struct PoleOptions {
     /// Wall-clock budget: past it the calibration stops with [`Error::Calibration`] (see
     /// [`crate::budget`]); `None` for no limit.
     pub time_budget: Option<std::time::Duration>,
+    /// Largest share of a cloud's returns that may be at or above the intensity threshold.
+    /// Tape is a small part of any scene (1-2 % in the simulated ones); a threshold that makes
+    /// most returns "tape" (e.g. 0) leaves walls and ground to be fitted as poles, and gave poses
+    /// 45-180 degrees off that were not always flagged (and thresholds marking 30 % still gave
+    /// poses 40-140 degrees off in simulated scenes). Above this share the calibration is
+    /// refused, naming the share and the data-driven threshold. A cloud cropped to the poles
+    /// themselves is mostly tape: raise it to 1.0 there.
+    pub max_bright_fraction: f64,
 }
+
+/// Default of [`PoleOptions::max_bright_fraction`].
+pub const MAX_BRIGHT_FRACTION: f64 = 0.25;
 
 impl Default for PoleOptions {
     fn default() -> Self {
@@ -254,6 +265,7 @@ impl Default for PoleOptions {
                 ..LmOptions::default()
             },
             time_budget: None,
+            max_bright_fraction: MAX_BRIGHT_FRACTION,
         }
     }
 }
@@ -441,6 +453,12 @@ fn check_options(o: &PoleOptions) -> Result<()> {
     }
     positive("cluster_tolerance", o.cluster_tolerance)?;
     positive("overlap_distance", o.overlap_distance)?;
+    if !(o.max_bright_fraction > 0.0 && o.max_bright_fraction <= 1.0) {
+        return Err(Error::InvalidInput(format!(
+            "max_bright_fraction must be in (0, 1], got {}",
+            o.max_bright_fraction
+        )));
+    }
     positive("min_elongation", o.min_elongation)?;
     if !(o.min_length.is_finite() && o.min_length >= 0.0) {
         return Err(Error::InvalidInput(format!(
@@ -505,6 +523,21 @@ fn extract_poles_until(
              highest intensity is {max:.1}): no taped poles visible, or the threshold is too high",
             bright.len(),
             options.min_points
+        )));
+    }
+    let share = bright.len() as f64 / points.len() as f64;
+    if share > options.max_bright_fraction {
+        let suggestion = match data_threshold(intensities) {
+            Ok(t) => format!("this cloud's data-driven threshold is {t:.1}"),
+            Err(_) => "this cloud has no clear bright class either".into(),
+        };
+        return Err(Error::Calibration(format!(
+            "intensity threshold {threshold:.1} marks {:.1} % of the returns as tape (more than \
+             {:.0} %): tape is a small part of a scene, so this threshold does not separate it; \
+             raise it ({suggestion}), or, for a cloud cropped to the poles, raise \
+             max_bright_fraction",
+            100.0 * share,
+            100.0 * options.max_bright_fraction
         )));
     }
     let bright_points: Vec<Point3<f64>> = bright.iter().map(|&i| points[i]).collect();

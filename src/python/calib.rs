@@ -623,8 +623,11 @@ fn calibrate_planes(
 /// Raises ValueError for malformed input and CalibrationError with the reason (no bright points,
 /// fewer than two poles, parallel poles, indistinguishable hypotheses). time_budget_s: as for
 /// calibrate_planes (a huge cluster_tolerance on a dense cloud makes the clustering quadratic).
+/// max_bright_fraction: refuse when more of a cloud's returns than this share are at or above the
+///     threshold (tape is a small part of a scene; a threshold of 0 makes everything "tape");
+///     raise it to 1.0 for a cloud cropped to the poles.
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit="cylinder", cluster_tolerance=0.5, min_points=15, max_iterations=100, time_budget_s=None))]
+#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit="cylinder", cluster_tolerance=0.5, min_points=15, max_iterations=100, time_budget_s=None, max_bright_fraction=0.25))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_poles(
     py: Python<'_>,
@@ -639,6 +642,7 @@ fn calibrate_poles(
     min_points: usize,
     max_iterations: usize,
     time_budget_s: Option<f64>,
+    max_bright_fraction: f64,
 ) -> PyResult<CalibrationResult> {
     let time_budget = crate::budget::budget_from_secs(time_budget_s)?;
     let (reference, ref_intensity) = arrays::points_with_intensity(reference, "reference")?;
@@ -667,6 +671,7 @@ fn calibrate_poles(
             ..defaults.lm
         },
         time_budget,
+        max_bright_fraction,
         ..defaults
     };
     let inner = run(py, move || {
@@ -739,15 +744,19 @@ fn calibrate_targetless(
 
 /// The options `calibrate(method="auto")` and `calibrate_rig` pass on: `seed` to every method,
 /// `up` to the corner method, `distance_threshold` to the corner and targetless methods,
-/// `intensity_threshold` and `vendor` to the poles.
+/// `intensity_threshold`, `vendor` and `max_bright_fraction` to the poles.
 fn method_options(
     seed: u64,
     up: Option<&Bound<'_, PyAny>>,
     distance_threshold: Option<f64>,
     intensity_threshold: Option<f64>,
     vendor: Option<&str>,
+    max_bright_fraction: Option<f64>,
 ) -> PyResult<MethodOptions> {
     let mut o = MethodOptions::with_seed(seed);
+    if let Some(f) = max_bright_fraction {
+        o.poles.max_bright_fraction = f;
+    }
     o.planes.up = up_arg(up)?;
     o.planes.distance_threshold = distance_threshold;
     o.targetless.distance_threshold = distance_threshold;
@@ -781,7 +790,7 @@ fn borrow_cloud(c: &OwnedCloud) -> crate::Result<Cloud<'_>> {
 /// reference point (within 0.01 of the best, the earlier method wins). Raises CalibrationError
 /// listing each method's reason when none succeeds.
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None))]
+#[pyo3(signature = (reference, target, *, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_auto(
     py: Python<'_>,
@@ -792,8 +801,16 @@ fn calibrate_auto(
     distance_threshold: Option<f64>,
     intensity_threshold: Option<f64>,
     vendor: Option<&str>,
+    max_bright_fraction: Option<f64>,
 ) -> PyResult<CalibrationResult> {
-    let options = method_options(seed, up, distance_threshold, intensity_threshold, vendor)?;
+    let options = method_options(
+        seed,
+        up,
+        distance_threshold,
+        intensity_threshold,
+        vendor,
+        max_bright_fraction,
+    )?;
     let reference = owned_cloud(reference, "reference")?;
     let target = owned_cloud(target, "target")?;
     let inner = run(py, move || {
@@ -963,6 +980,10 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("AGREEMENT_DISTANCE", rig::AGREEMENT_DISTANCE)?;
     m.add("AUTO_TIE", rig::AUTO_TIE)?;
     m.add("MIN_PAIR_OVERLAP", rig::MIN_PAIR_OVERLAP)?;
+    m.add(
+        "MAX_BRIGHT_FRACTION",
+        crate::calib::poles::MAX_BRIGHT_FRACTION,
+    )?;
     m.add_function(wrap_pyfunction!(rqe, m)?)?;
     Ok(())
 }

@@ -371,10 +371,26 @@ CASES: list[Case] = [
         "bright point(s) at or above intensity",
     ),
     Case(
-        "poles: bright Gaussian blob",
+        "poles: everything bright",
         poles_call(lambda: np.hstack([_blob(), np.full((5000, 1), 250.0)]), vendor="velodyne"),
         CE,
+        "100.0 % of the returns as tape",
+    ),
+    Case(
+        "poles: bright Gaussian blob",
+        poles_call(
+            lambda: np.hstack([_blob(), np.full((5000, 1), 250.0)]),
+            vendor="velodyne",
+            max_bright_fraction=1.0,
+        ),
+        CE,
         "compact bright blob",
+    ),
+    Case(
+        "poles: max_bright_fraction 0",
+        poles_call(lambda: poles()[0], max_bright_fraction=0.0),
+        ValueError,
+        "max_bright_fraction must be in (0, 1]",
     ),
     Case("poles: parallel poles", poles_call(parallel_poles), CE, "parallel"),
     Case(
@@ -742,6 +758,7 @@ def test_time_budget_stops_a_pathological_clustering() -> None:
             scene.reference,
             scene.target,
             intensity_threshold=0.0,
+            max_bright_fraction=1.0,  # else refused at once: every return would be "tape"
             cluster_tolerance=5.0,
             time_budget_s=0.2,
         )

@@ -169,3 +169,17 @@ def test_planes_result_has_no_pole_attributes() -> None:
     result = lidarcal.calibrate_planes(cloud, cloud)
     assert result.poles_reference is None and result.hypothesis_scores is None
     assert result.ambiguous is None and result.pole_radii is None
+
+
+@pytest.mark.parametrize(("model", "seed"), [("os128", 2), ("vlp16", 0)])
+def test_a_threshold_that_makes_everything_tape_is_refused(model: str, seed: int) -> None:
+    # Threshold 0: every return is "tape". These two scenes came back 45 and 111 degrees off,
+    # with ambiguous=False, before the bright-share check.
+    scene = sim.poles_scene(model, seed=seed)
+    with pytest.raises(lidarcal.CalibrationError, match=r"100\.0 % of the returns as tape"):
+        lidarcal.calibrate_poles(scene.reference, scene.target, intensity_threshold=0.0)
+    with pytest.raises(ValueError, match=r"max_bright_fraction must be in \(0, 1\]"):
+        lidarcal.calibrate_poles(scene.reference, scene.target, max_bright_fraction=1.5)
+    result = lidarcal.calibrate_poles(scene.reference, scene.target)
+    angle, dist = errors(scene.reference_from_target, result.transform)
+    assert np.degrees(angle) < 0.5 and dist < 0.05, (angle, dist)

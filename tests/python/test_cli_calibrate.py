@@ -377,3 +377,19 @@ def test_auto_on_a_street_reports_targetless(tmp_path: Path) -> None:
     assert rotation_error_deg(scene.reference_from_target, t) < 0.1
     assert np.linalg.norm(scene.reference_from_target[:3, 3] - t[:3, 3]) < 0.03
     assert yaml.safe_load(out.read_text()) == printed
+
+
+def test_poles_threshold_that_marks_everything_is_refused(tmp_path: Path) -> None:
+    scene = sim.poles_scene("vlp16", seed=0)
+    ref, tgt = tmp_path / "ref.npy", tmp_path / "tgt.npy"
+    np.save(ref, scene.reference)
+    np.save(tgt, scene.target)
+    args = ["calibrate", str(ref), str(tgt), "--method", "poles"]
+    res = CliRunner().invoke(main, [*args, "--intensity-threshold", "0"])
+    assert res.exit_code == 1
+    assert "100.0 % of the returns as tape" in res.stderr and "max_bright_fraction" in res.stderr
+    res = CliRunner().invoke(main, [*args, "--max-bright-fraction", "0"])
+    assert res.exit_code == 2 and "--max-bright-fraction" in res.output
+    res = CliRunner().invoke(main, [*args, "--max-bright-fraction", "0.5", "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["method"] == "poles"
