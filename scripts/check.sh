@@ -29,6 +29,9 @@ PYO3_PYTHON="$PY" cargo clippy --all-targets --all-features --quiet -- -D warnin
 step "cargo test"
 cargo test --quiet
 
+step "cargo doc (warnings are errors: broken intra-doc links)"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --quiet
+
 step "cargo check --no-default-features"
 cargo check --no-default-features --quiet
 if cargo tree --no-default-features -e normal --prefix none | grep -Eq '^(pyo3|numpy|rayon) '; then

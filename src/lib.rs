@@ -4,20 +4,32 @@
 //! target sensor's points into a reference sensor's frame (`p_ref = R p_tgt + t`), found from what
 //! the sensors see, without an initial guess.
 //!
-//! This release provides the numerical foundation the calibration methods are built on:
+//! The calibration methods, in [`calib`]:
+//!
+//! * [`calib::planes`]: three planar surfaces of a wall corner (Jiao et al., 2019), any mounting.
+//! * [`calib::poles`]: two or more poles wrapped in retro-reflective tape (cylinder axes).
+//! * [`calib::targetless`]: the planes of an ordinary scene (a street), matched without an
+//!   initial guess, verified by free-space consistency and refined by point-to-plane ICP.
+//! * [`calib::rig`]: one entry point ([`calib::rig::Method::Auto`] keeps the best-fitting
+//!   method's result) and several sensors at once, made consistent by a pose graph.
+//!
+//! and what they are built on:
 //!
 //! * [`geometry`]: SO(3)/SE(3) exponential and logarithm (accurate near 0 and pi), 4x4
 //!   conversions, [`Plane`] and [`Line`].
 //! * [`kabsch`](mod@kabsch): weighted Kabsch with the reflection fix and a documented degeneracy test.
 //! * [`lm`]: a Levenberg–Marquardt solver on SE(3) with a report (termination reason, `J^T J`).
 //! * [`residuals`]: point-to-plane and point-to-line problems with analytic Jacobians.
+//! * [`ransac`]: parallel, deterministic RANSAC for planes and lines; multi-plane extraction.
 //! * [`fit`]: plane, line and cylinder fits ([`fit::cylinder::fit_cylinder`] recovers a pole's axis).
-//! * [`sim`]: a scan simulator (VLP-16, HDL-32E, HDL-64E, OS1-128; walls, boxes, taped poles) with
-//!   ground-truth scenes.
+//! * [`cluster`]: Euclidean clustering on a hash grid; [`metrics`]: Rényi quadratic entropy.
 //! * [`icp`]: voxel downsampling, surface normals and robust point-to-plane ICP.
 //! * [`visibility`]: free-space consistency of two scans (range images), which tells a wrong pose
 //!   from the truth when point agreement cannot.
-//! * `io` (feature `io`): a PCD writer.
+//! * [`sim`]: a scan simulator (VLP-16, HDL-32E, HDL-64E, OS1-128; walls, boxes, taped poles,
+//!   streets) with ground-truth scenes.
+//! * [`budget`]: wall-clock limits for the long-running stages.
+//! * `io` (feature `io`): PCD, PLY, KITTI `.bin`, `.npy` and CSV/TXT point clouds.
 //!
 //! ## Features
 //! * `parallel` (default): rayon in residual accumulation. Results are bit-identical with or
@@ -25,7 +37,8 @@
 //! * `io` (default): point-cloud file formats.
 //! * `python`: the PyO3 extension module; only maturin turns it on.
 //!
-//! With `default-features = false` the crate depends on nalgebra and thiserror only, never panics
+//! With `default-features = false` the crate depends on nalgebra, rand (with rand_chacha and
+//! rand_distr), rstar and thiserror only (no rayon, no pyo3), never panics
 //! on bad input (every fallible function returns [`Result`]) and holds no global state.
 //!
 //! ## Example: recover a pose from three planes

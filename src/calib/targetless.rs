@@ -5,9 +5,10 @@
 //! 1. **Downsample.** Each cloud is reduced to voxel centroids ([`TargetlessOptions::voxel_size`]),
 //!    which evens out a spinning LiDAR's density and bounds the work.
 //! 2. **Planes.** Up to [`TargetlessOptions::max_planes`] distinct planes per cloud
-//!    ([`extract_distinct_planes`]: sequential RANSAC in which a plane within 10 degrees and 1 m of
-//!    an accepted one is another slice of it, as an uneven road is, then the joint reassignment).
-//!    Each keeps its inlier count, centroid and extent. The inlier threshold is `3 sigma` of each
+//!    ([`segment_planes`]: flat patches of [`PATCH_SIZE`] grown into surfaces and merged where
+//!    they continue one another, as an uneven road does, plus sequential RANSAC for the few scan
+//!    lines a tilted unit puts on a facade, which make no flat patch). Each keeps its inlier
+//!    count, centroid and extent ([`PlaneFeature`]). The inlier threshold is `3 sigma` of each
 //!    cloud's noise ([`estimate_threshold`]) unless given.
 //! 3. **Hypotheses.** Two non-parallel planes fix the rotation: for every pair of reference planes
 //!    at least [`MIN_PAIR_ANGLE`] from parallel and every ordered pair of target planes whose
@@ -63,7 +64,7 @@
 //!   when it is too small.
 //!
 //! # Example
-//! ```no_run
+//! ```
 //! use lidarcal::calib::targetless::{calibrate_targetless, TargetlessOptions};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
 //!

@@ -17,8 +17,8 @@
 //! column (PCL writes NaN for missing returns) are dropped and counted in [`Cloud::dropped`].
 //!
 //! Every malformed file (wrong header, truncated data, a corrupt LZF block) gives
-//! [`Error::Format`](crate::Error::Format) naming the file and the problem; the operating system's
-//! refusals (missing file, permissions) give [`Error::Io`](crate::Error::Io). Nothing panics and
+//! [`crate::Error::Format`] naming the file and the problem; the operating system's
+//! refusals (missing file, permissions) give [`crate::Error::Io`]. Nothing panics and
 //! nothing allocates more than the file can hold.
 //!
 //! [`write_points`] writes a cloud in any of these formats (PCD and PLY binary with `float32`
