@@ -109,6 +109,18 @@ def test_bad_input() -> None:
         lidarcal.calibrate(np.zeros((100, 2)), scene.target)
     with pytest.raises(ValueError, match="targets is empty"):
         lidarcal.calibrate_rig(scene.reference, {})
+    bad = scene.target.copy()
+    bad[5, 1] = np.nan
+    with pytest.raises(ValueError, match=r"left has 1 row.* NaN .* row 5"):
+        lidarcal.calibrate_rig(scene.reference, {"left": bad})
+    with pytest.raises(ValueError, match=r"left must have shape \(N, 3\) or \(N, 4\)"):
+        lidarcal.calibrate_rig(scene.reference, {"left": scene.target[:, :2]})
+    with pytest.raises(ValueError, match="method must be 'auto'"):
+        lidarcal.calibrate_rig(scene.reference, [scene.target], method="icp")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="'reference' is reserved"):
+        lidarcal.calibrate_rig(scene.reference, {"reference": scene.target})
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        lidarcal.calibrate_rig(scene.reference, [scene.target], seed=-1)
 
 
 # Every real_world pair within the issue 8 goal: 0.5 deg / 5 cm against the reference (itself

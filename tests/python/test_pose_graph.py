@@ -85,6 +85,10 @@ def test_bad_graphs() -> None:
         lidarcal.refine_pose_graph(np.stack([eye, eye]), [(0, 1, eye, nan)])
     with pytest.raises(ValueError, match=r"shape \(6, 6\)"):
         lidarcal.refine_pose_graph(np.stack([eye, eye]), [(0, 1, eye, np.eye(5))])
+    with pytest.raises(ValueError, match=r"last row of a 4x4 transform"):
+        lidarcal.refine_pose_graph(np.stack([eye, 2 * eye]), [(0, 1, eye, w)])
+    with pytest.raises(ValueError, match=r"edges\[0\] a_from_b contains 16 non-finite"):
+        lidarcal.refine_pose_graph(np.stack([eye, eye]), [(0, 1, eye * np.nan, w)])
     with pytest.raises(ValueError, match="iterations"):
         lidarcal.refine_pose_graph(np.stack([eye, eye]), [(0, 1, eye, w)], iterations=-1)
 
