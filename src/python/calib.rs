@@ -742,7 +742,7 @@ fn calibrate_targetless(
     })
 }
 
-/// The options `calibrate(method="auto")` and `calibrate_rig` pass on: `seed` to every method,
+/// The options `calibrate(method="auto")` passes on: `seed` to every method,
 /// `up` to the corner method, `distance_threshold` to the corner and targetless methods,
 /// `intensity_threshold`, `vendor` and `max_bright_fraction` to the poles.
 fn method_options(
