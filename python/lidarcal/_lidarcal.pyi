@@ -215,6 +215,11 @@ def calibrate_rig(
     pairwise: bool = True,
     require_all: bool = True,
     seed: int = 0,
+    up: ArrayLike | None = None,
+    distance_threshold: float | None = None,
+    intensity_threshold: float | None = None,
+    vendor: str | None = None,
+    max_bright_fraction: float | None = None,
 ) -> dict[str, Any]: ...
 def refine_pose_graph(
     poses: list[F64Array],

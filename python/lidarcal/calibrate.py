@@ -127,6 +127,8 @@ class RigEdge:
     #: Disagreement of the refined rig with this edge: rotation (degrees) and translation (m).
     rotation_residual_deg: float = float("nan")
     translation_residual_m: float = float("nan")
+    #: The method's full result (diagnostics, covariance); ``result.transform`` is ``a_from_b``.
+    result: CalibrationResult | None = None
 
 
 @dataclass(frozen=True)
@@ -183,6 +185,11 @@ def calibrate_rig(
     pairwise: bool = True,
     require_all: bool = True,
     seed: int = 0,
+    up: npt.ArrayLike | None = None,
+    distance_threshold: float | None = None,
+    intensity_threshold: float | None = None,
+    vendor: Vendor | None = None,
+    max_bright_fraction: float | None = None,
 ) -> RigCalibration:
     """Calibrates several target LiDARs against one reference and makes the set consistent.
 
@@ -195,7 +202,8 @@ def calibrate_rig(
     reference but overlaps a calibrated target is reached through it. Raises
     :class:`CalibrationError` when some target cannot be connected to the reference, unless
     ``require_all=False``: then the others are returned and that target is listed in
-    ``unconnected`` (with its reasons in ``failures``).
+    ``unconnected`` (with its reasons in ``failures``). The method options go to every edge's
+    calibration as in :func:`calibrate`.
     """
     ref = _cloud(reference, "reference")
     if isinstance(targets, Mapping):
@@ -215,6 +223,11 @@ def calibrate_rig(
         pairwise=pairwise,
         require_all=require_all,
         seed=seed,
+        up=up,
+        distance_threshold=distance_threshold,
+        intensity_threshold=intensity_threshold,
+        vendor=vendor,
+        max_bright_fraction=max_bright_fraction,
     )
     return RigCalibration(
         transforms=dict(out["transforms"]),
@@ -227,8 +240,9 @@ def calibrate_rig(
                 a_from_b=z,
                 rotation_residual_deg=rot,
                 translation_residual_m=trans,
+                result=result,
             )
-            for a, b, m, z, rot, trans in out["edges"]
+            for a, b, m, z, rot, trans, result in out["edges"]
         ],
         failures=dict(out["failures"]),
         unconnected=list(out["unconnected"]),

@@ -344,6 +344,15 @@ def _summary(entry: dict[str, Any], parent: str, child: str) -> str:
         )
     rmse = ", ".join(f"{100 * r:.2f}" for r in entry["rmse"])
     lines.append(f"  feature rmse cm   {rmse}")
+    if "rig" in entry:
+        edges = entry["rig"]["edges"]
+        worst_r = max(e["rotation_residual_deg"] for e in edges)
+        worst_t = max(e["translation_residual_m"] for e in edges)
+        how = "direct" if entry["rig"]["direct"] else "placed through another target"
+        lines.append(
+            f"  rig               {how}; {len(edges)} edge(s), largest residual "
+            f"{worst_r:.3f} deg / {100 * worst_t:.1f} cm"
+        )
     lines.append("  " + static_transform_publisher(t, parent, child))
     return "\n".join(lines)
 
@@ -354,7 +363,11 @@ def _check_output(output: Path) -> None:
 
 
 def _plot(
-    reference: np.ndarray, target: np.ndarray, result: CalibrationResult, png: Path, title: str
+    reference: np.ndarray,
+    target: np.ndarray,
+    result: CalibrationResult | np.ndarray,
+    png: Path,
+    title: str,
 ) -> None:
     try:
         from lidarcal.plot import overlay
@@ -366,6 +379,92 @@ def _plot(
         raise click.ClickException(str(e)) from e
     except OSError as e:
         raise click.ClickException(f"{png}: {e}") from e
+
+
+def _rig_entries(
+    reference: Source,
+    ref_points: np.ndarray,
+    clouds: list[tuple[Source, np.ndarray]],
+    method: str,
+    options: dict[str, Any],
+    plot: Path | None,
+) -> tuple[list[dict[str, Any]], list[str]]:
+    """`--rig`: every target to the reference and to each other, made consistent by the pose
+    graph of :func:`lidarcal.calibrate_rig`. One entry per target, as without `--rig`, whose pose
+    is the refined one; `rig` in each entry lists that target's edges and their residuals."""
+    named: dict[str, tuple[Source, np.ndarray]] = {}
+    for source, points in clouds:
+        name, k = source.frame, 2
+        while name in named or name == "reference":
+            name, k = f"{source.frame}_{k}", k + 1
+        named[name] = (source, points)
+
+    def failed(source: Source, message: str) -> dict[str, Any]:
+        return {"reference": reference.text, "target": source.text, "error": message}
+
+    try:
+        rig = lidarcal.calibrate_rig(
+            ref_points,
+            {name: points for name, (_, points) in named.items()},
+            method=method,  # type: ignore[arg-type]
+            require_all=False,
+            seed=options["seed"],
+            up=options["up"],
+            distance_threshold=options["threshold"],
+            intensity_threshold=options["intensity_threshold"],
+            vendor=options["vendor"],
+            max_bright_fraction=options["max_bright_fraction"],
+        )
+    except (ValueError, CalibrationError) as e:
+        return [failed(s, str(e)) for s, _ in named.values()], [
+            f"{s.text}: {e}" for s, _ in named.values()
+        ]
+    entries: list[dict[str, Any]] = []
+    failures: list[str] = []
+    for name, (source, points) in named.items():
+        touching = [e for e in rig.edges if name in (e.a, e.b) and e.result is not None]
+        if name not in rig.transforms or not touching:
+            reasons = "; ".join(
+                f"{a} -> {b}: {m}" for (a, b), m in rig.failures.items() if name in (a, b)
+            )
+            message = f"not connected to the reference ({reasons})"
+            failures.append(f"{source.text}: {message}")
+            entries.append(failed(source, message))
+            continue
+        # The direct edge when there is one, else the edge through which the target was placed.
+        edge = next((e for e in touching if e.a == "reference"), touching[0])
+        assert edge.result is not None
+        entry = to_dict(
+            edge.result,
+            reference=reference.text,
+            target=source.text,
+            reference_frame=reference.frame,
+            target_frame=source.frame,
+            transform=rig.transforms[name],
+        )
+        entry["rig"] = {
+            "direct": name in rig.direct,
+            "edges": [
+                {
+                    "a": e.a,
+                    "b": e.b,
+                    "method": e.method,
+                    "rotation_residual_deg": e.rotation_residual_deg,
+                    "translation_residual_m": e.translation_residual_m,
+                }
+                for e in touching
+            ],
+        }
+        entries.append(entry)
+        if plot is not None:
+            png = (
+                plot.with_name(f"{plot.stem}_{source.frame}{plot.suffix}")
+                if len(named) > 1
+                else plot
+            )
+            _plot(ref_points, points, rig.transforms[name], png, f"{source.path.name} (rig)")
+            entry["plot"] = str(png)
+    return entries, failures
 
 
 @main.command()
@@ -433,6 +532,13 @@ def _plot(
     "(needs matplotlib). With several targets, one file per target: NAME_<target>.png.",
 )
 @click.option(
+    "--rig",
+    is_flag=True,
+    help="Several targets: also calibrate the targets to each other where they overlap and "
+    "refine all poses together (a pose graph), so the set is consistent; a target the reference "
+    "barely sees can be placed through another. Each result's `rig` field lists its edges.",
+)
+@click.option(
     "--json",
     "as_json",
     is_flag=True,
@@ -454,6 +560,7 @@ def calibrate(
     bag_time: float | None,
     output: Path | None,
     plot: Path | None,
+    rig: bool,
     as_json: bool,
 ) -> None:
     """Calibrate each TARGET cloud to the REFERENCE cloud, with no initial guess.
@@ -467,6 +574,7 @@ def calibrate(
       lidarcal calibrate top.pcd front.pcd --up 0,0,1 --output front.yaml --plot front.png
       lidarcal calibrate top.pcd left.pcd right.pcd --crop -20,20,-20,20,-3,10 --json
       lidarcal calibrate drive.bag:/top/points drive.bag:/left/points --time 12.5
+      lidarcal calibrate top.pcd left.pcd right.pcd rear.pcd --rig --output rig.urdf
 
     Exits with status 1 and a one-line message if a calibration fails; the other targets are
     still calibrated and reported.
@@ -493,49 +601,68 @@ def calibrate(
 
     entries: list[dict[str, Any]] = []
     failures: list[str] = []
-    show_progress = len(targets) > 1 and sys.stderr.isatty()
-    with contextlib.ExitStack() as stack:
-        items: Iterable[Source] = targets
-        if show_progress:
-            items = stack.enter_context(
-                click.progressbar(
-                    targets,
-                    label="calibrating",
-                    file=sys.stderr,
-                    item_show_func=lambda p: p.text if p is not None else None,
-                )
-            )
-        for target in items:
+    if rig:
+        loaded: list[tuple[Source, np.ndarray]] = []
+        for target in targets:
             try:
-                tgt_points = load_cloud(target, crop_box, topic, bag_time)
-                result = _calibrate(method, ref_points, tgt_points, options)
-            except (ValueError, OSError, CalibrationError) as e:
+                loaded.append((target, load_cloud(target, crop_box, topic, bag_time)))
+            except (ValueError, OSError) as e:
                 failures.append(f"{target.text}: {e}")
                 entries.append(
                     {"reference": reference.text, "target": target.text, "error": str(e)}
                 )
-                continue
-            entry = to_dict(
-                result,
-                reference=reference.text,
-                target=target.text,
-                reference_frame=reference.frame,
-                target_frame=target.frame,
-            )
-            entries.append(entry)
-            if entry["diagnostics"].get("ambiguous"):
-                click.echo(
-                    f"Warning: {target.text}: another hypothesis fits almost as well "
-                    "(diagnostics.ambiguous); check the plot before trusting this result",
-                    err=True,
+        if loaded:
+            placed, unplaced = _rig_entries(reference, ref_points, loaded, method, options, plot)
+            entries.extend(placed)
+            failures.extend(unplaced)
+            order = {t.text: i for i, t in enumerate(targets)}
+            entries.sort(key=lambda e: order.get(e["target"], 0))
+    else:
+        show_progress = len(targets) > 1 and sys.stderr.isatty()
+        with contextlib.ExitStack() as stack:
+            items: Iterable[Source] = targets
+            if show_progress:
+                items = stack.enter_context(
+                    click.progressbar(
+                        targets,
+                        label="calibrating",
+                        file=sys.stderr,
+                        item_show_func=lambda p: p.text if p is not None else None,
+                    )
                 )
-            if plot is not None:
-                png = plot
-                if len(targets) > 1:
-                    png = plot.with_name(f"{plot.stem}_{target.frame}{plot.suffix}")
-                title = f"{target.path.name} -> {reference.path.name}"
-                _plot(ref_points, tgt_points, result, png, title)
-                entry["plot"] = str(png)
+            for target in items:
+                try:
+                    tgt_points = load_cloud(target, crop_box, topic, bag_time)
+                    result = _calibrate(method, ref_points, tgt_points, options)
+                except (ValueError, OSError, CalibrationError) as e:
+                    failures.append(f"{target.text}: {e}")
+                    entries.append(
+                        {"reference": reference.text, "target": target.text, "error": str(e)}
+                    )
+                    continue
+                entry = to_dict(
+                    result,
+                    reference=reference.text,
+                    target=target.text,
+                    reference_frame=reference.frame,
+                    target_frame=target.frame,
+                )
+                entries.append(entry)
+                if plot is not None:
+                    png = plot
+                    if len(targets) > 1:
+                        png = plot.with_name(f"{plot.stem}_{target.frame}{plot.suffix}")
+                    title = f"{target.path.name} -> {reference.path.name}"
+                    _plot(ref_points, tgt_points, result, png, title)
+                    entry["plot"] = str(png)
+
+    for entry in entries:
+        if entry.get("diagnostics", {}).get("ambiguous"):
+            click.echo(
+                f"Warning: {entry['target']}: another hypothesis fits almost as well "
+                "(diagnostics.ambiguous); check the plot before trusting this result",
+                err=True,
+            )
 
     good = [e for e in entries if "error" not in e]
     if output is not None and good:

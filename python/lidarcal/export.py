@@ -106,11 +106,19 @@ def to_dict(
     target: str | None = None,
     reference_frame: str | None = None,
     target_frame: str | None = None,
+    transform: npt.ArrayLike | None = None,
 ) -> dict[str, Any]:
     """A JSON-ready summary of ``result``. ``reference`` / ``target`` name the clouds (files);
     ``reference_frame`` / ``target_frame`` are the frame ids for URDF and tf (default: the files'
-    stems, cleaned to letters, digits and ``_``)."""
-    t = np.asarray(result.transform)
+    stems, cleaned to letters, digits and ``_``).
+
+    ``transform`` reports another pose than ``result.transform`` (e.g. the one a rig's pose graph
+    made of it): the pose fields are that transform, ``diagnostics["method_transform"]`` keeps
+    the method's own, and the 1-sigma fields (which describe the method's pose) are left out."""
+    own = np.asarray(result.transform)
+    t = own if transform is None else np.asarray(transform, dtype=np.float64)
+    if t.shape != (4, 4):
+        raise ValueError(f"transform must be 4x4, got shape {t.shape}")
     rotation, translation = t[:3, :3], t[:3, 3]
     angles = rpy(rotation)
     out: dict[str, Any] = {
@@ -128,7 +136,7 @@ def to_dict(
         "rmse": _list(result.rmse),
     }
     cov = result.covariance
-    if cov is not None:
+    if cov is not None and transform is None:
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         out["std_translation_m"] = sd[:3].tolist()
         out["std_rotation_deg"] = np.degrees(sd[3:]).tolist()
@@ -140,6 +148,8 @@ def to_dict(
         "timings_ms": dict(result.timings),
         "covariance": _list(cov),
     }
+    if transform is not None:
+        diagnostics["method_transform"] = own.tolist()
     if result.method == "planes":
         diagnostics.update(
             planes_reference=_list(result.planes_reference),

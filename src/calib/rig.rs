@@ -525,6 +525,8 @@ pub struct RigEdge {
     pub rotation_residual_deg: f64,
     /// Disagreement of the refined rig with this edge, translation (m).
     pub translation_residual_m: f64,
+    /// The method's full result (diagnostics, inliers, covariance).
+    pub result: Calibration,
 }
 
 /// A pair that gave no edge, and why.
@@ -716,17 +718,18 @@ pub fn calibrate_rig(
     let refined = refine_pose_graph(&start, &graph, options.graph_iterations)?;
     let refined_of = |node: usize| index[node].and_then(|i| refined.get(i)).copied();
     let mut edges = Vec::with_capacity(measured.len());
-    for ((a, b, c), g) in measured.iter().zip(&graph) {
-        if let (Some(pa), Some(pb)) = (refined_of(*a), refined_of(*b)) {
+    for ((a, b, c), g) in measured.into_iter().zip(&graph) {
+        if let (Some(pa), Some(pb)) = (refined_of(a), refined_of(b)) {
             let err = edge_error(c.reference_from_target(), &pa, &pb);
             edges.push(RigEdge {
-                a: names[*a].to_string(),
-                b: names[*b].to_string(),
+                a: names[a].to_string(),
+                b: names[b].to_string(),
                 method: c.method(),
                 a_from_b: *c.reference_from_target(),
                 information: g.information,
                 rotation_residual_deg: err.fixed_rows::<3>(3).norm().to_degrees(),
                 translation_residual_m: err.fixed_rows::<3>(0).norm(),
+                result: c,
             });
         }
     }

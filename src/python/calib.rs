@@ -742,7 +742,7 @@ fn calibrate_targetless(
     })
 }
 
-/// The options `calibrate(method="auto")` passes on: `seed` to every method,
+/// The options `calibrate(method="auto")` and `calibrate_rig` pass on: `seed` to every method,
 /// `up` to the corner method, `distance_threshold` to the corner and targetless methods,
 /// `intensity_threshold`, `vendor` and `max_bright_fraction` to the poles.
 fn method_options(
@@ -825,11 +825,13 @@ fn calibrate_auto(
 }
 
 /// The rig calibration in Rust (lidarcal.calibrate_rig wraps it). targets: a list of
-/// (name, cloud). Returns a dict: "transforms" and "direct" ({name: (4, 4)}), "edges" (a list of
-/// (a, b, method, a_from_b, rotation_residual_deg, translation_residual_m)), "failures"
+/// (name, cloud); the method options as for calibrate_auto. Returns a dict: "transforms" and
+/// "direct" ({name: (4, 4)}), "edges" (a list of (a, b, method, a_from_b,
+/// rotation_residual_deg, translation_residual_m, CalibrationResult)), "failures"
 /// ({(a, b): reason}) and "unconnected" (names).
 #[pyfunction]
-#[pyo3(signature = (reference, targets, *, method="auto", pairwise=true, require_all=true, seed=0))]
+#[pyo3(signature = (reference, targets, *, method="auto", pairwise=true, require_all=true, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
+#[allow(clippy::too_many_arguments)]
 fn calibrate_rig<'py>(
     py: Python<'py>,
     reference: &Bound<'py, PyAny>,
@@ -838,8 +840,21 @@ fn calibrate_rig<'py>(
     pairwise: bool,
     require_all: bool,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
+    up: Option<&Bound<'py, PyAny>>,
+    distance_threshold: Option<f64>,
+    intensity_threshold: Option<f64>,
+    vendor: Option<&str>,
+    max_bright_fraction: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let method = Method::from_name(method)?;
+    let methods = method_options(
+        seed,
+        up,
+        distance_threshold,
+        intensity_threshold,
+        vendor,
+        max_bright_fraction,
+    )?;
     let reference = owned_cloud(reference, "reference")?;
     let clouds = targets
         .iter()
@@ -847,7 +862,7 @@ fn calibrate_rig<'py>(
         .collect::<PyResult<Vec<_>>>()?;
     let options = RigOptions {
         method,
-        methods: MethodOptions::with_seed(seed),
+        methods,
         pairwise,
         require_all,
         ..RigOptions::default()
@@ -871,15 +886,16 @@ fn calibrate_rig<'py>(
     d.set_item("direct", poses(&out.direct)?)?;
     let edges = out
         .edges
-        .iter()
+        .into_iter()
         .map(|e| {
             Ok((
-                e.a.clone(),
-                e.b.clone(),
+                e.a,
+                e.b,
                 e.method.name(),
                 matrix4(py, &e.a_from_b)?,
                 e.rotation_residual_deg,
                 e.translation_residual_m,
+                Bound::new(py, CalibrationResult { inner: e.result })?,
             ))
         })
         .collect::<PyResult<Vec<_>>>()?;

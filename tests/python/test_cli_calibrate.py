@@ -393,3 +393,38 @@ def test_poles_threshold_that_marks_everything_is_refused(tmp_path: Path) -> Non
     res = CliRunner().invoke(main, [*args, "--max-bright-fraction", "0.5", "--json"])
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)["method"] == "poles"
+
+
+def test_rig_flag(tmp_path: Path) -> None:
+    left = sim.street_scene(seed=0, side="left")
+    right = sim.street_scene(seed=0, side="right")
+    files = {}
+    for name, cloud in (("top", left.reference), ("left", left.target), ("right", right.target)):
+        files[name] = tmp_path / f"{name}.npy"
+        np.save(files[name], cloud)
+    rng = np.random.default_rng(0)
+    ground = np.column_stack([rng.uniform(-10, 10, (5000, 2)), rng.normal(-1.8, 0.01, 5000)])
+    files["ground"] = tmp_path / "ground.npy"
+    np.save(files["ground"], ground)
+    args = ["calibrate", *(str(files[n]) for n in ("top", "left", "right", "ground"))]
+    out = tmp_path / "rig.yaml"
+    res = CliRunner().invoke(
+        main, [*args, "--rig", "--method", "targetless", "--json", "--output", str(out)]
+    )
+    assert res.exit_code == 1, res.output  # the ground-only unit cannot be placed
+    assert "ground.npy: not connected to the reference" in res.stderr
+    results = json.loads(res.stdout)["results"]
+    assert [Path(r["target"]).stem for r in results] == ["left", "right", "ground"]
+    for r, scene in zip(results[:2], (left, right), strict=True):
+        t = np.array(r["transform"])
+        assert rotation_error_deg(scene.reference_from_target, t) < 0.2
+        assert np.linalg.norm(t[:3, 3] - scene.reference_from_target[:3, 3]) < 0.05
+        assert r["rig"]["direct"] is True
+        assert {(e["a"], e["b"]) for e in r["rig"]["edges"]} >= {("reference", r["target_frame"])}
+        # The pose is the graph's; the method's own is kept, and its 1-sigma is not claimed.
+        assert "method_transform" in r["diagnostics"] and "std_translation_m" not in r
+    assert "error" in results[2]
+    assert out.exists() and "left" in out.read_text()
+    text = CliRunner().invoke(main, [*args[:4], "--rig", "--method", "targetless"])
+    assert text.exit_code == 0, text.output
+    assert "rig               direct; " in text.output
