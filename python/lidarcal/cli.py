@@ -301,6 +301,18 @@ def load_cloud(
     return points
 
 
+def _method_kwargs(options: dict[str, Any]) -> dict[str, Any]:
+    """The command's method options as keywords of `lidarcal.calibrate` / `calibrate_rig`."""
+    return {
+        "seed": options["seed"],
+        "up": options["up"],
+        "distance_threshold": options["threshold"],
+        "intensity_threshold": options["intensity_threshold"],
+        "vendor": options["vendor"],
+        "max_bright_fraction": options["max_bright_fraction"],
+    }
+
+
 def _calibrate(
     method: str, reference: np.ndarray, target: np.ndarray, options: dict[str, Any]
 ) -> CalibrationResult:
@@ -311,12 +323,7 @@ def _calibrate(
         reference,
         target,
         method,  # type: ignore[arg-type]
-        seed=options["seed"],
-        up=options["up"],
-        distance_threshold=options["threshold"],
-        intensity_threshold=options["intensity_threshold"],
-        vendor=options["vendor"],
-        max_bright_fraction=options["max_bright_fraction"],
+        **_method_kwargs(options),
     )
 
 
@@ -408,12 +415,7 @@ def _rig_entries(
             {name: points for name, (_, points) in named.items()},
             method=method,  # type: ignore[arg-type]
             require_all=False,
-            seed=options["seed"],
-            up=options["up"],
-            distance_threshold=options["threshold"],
-            intensity_threshold=options["intensity_threshold"],
-            vendor=options["vendor"],
-            max_bright_fraction=options["max_bright_fraction"],
+            **_method_kwargs(options),
         )
     except (ValueError, CalibrationError) as e:
         return [failed(s, str(e)) for s, _ in named.values()], [
