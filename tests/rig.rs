@@ -2,7 +2,13 @@
 //! street seen by a roof unit and two tilted side units.
 
 use lidarcal::calib::rig::{calibrate, calibrate_rig, Cloud, Method, MethodOptions, RigOptions};
-use lidarcal::calib::targetless::pose_error;
+use lidarcal::calib::targetless;
+
+/// (rotation error in degrees, translation error in metres).
+fn pose_error(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> (f64, f64) {
+    let (angle, dist) = targetless::pose_error(a, b);
+    (angle.to_degrees(), dist)
+}
 use lidarcal::sim::beams::{BeamModel, Preset};
 use lidarcal::sim::scenes::{
     corner_scene, poles_scene, street_scene, CornerOptions, PolesOptions, Side, StreetOptions,
@@ -71,9 +77,12 @@ fn auto_tries_the_poles_only_with_intensity() {
         &MethodOptions::default(),
     );
     let poles = with.unwrap();
+    assert_eq!(poles.method(), Method::Poles);
     let (angle, dist) = pose_error(&scene.reference_from_target, poles.reference_from_target());
+    // The pole method's usual accuracy on these scenes (tests/calib_poles.rs: median 0.29 deg /
+    // 2 cm); this scene gives 0.25 deg / 2.0 cm.
     assert!(
-        angle < 0.2 && dist < 0.03,
+        angle < 0.5 && dist < 0.05,
         "{:?} {angle} {dist}",
         poles.method()
     );

@@ -8,7 +8,8 @@
 //!   point. A method that fails with [`Error::Calibration`] is skipped (its reason is kept for the
 //!   error when none succeeds); malformed input is returned at once.
 //! * [`calibrate_rig`] builds the edges and refines them with [`refine_pose_graph`]
-//!   (Gauss–Newton on the SE(3) tangent errors, each edge weighted by its information matrix).
+//!   (Gauss–Newton on the SE(3) tangent errors, each edge weighted by its information matrix,
+//!   with a step halved whenever it would raise the cost).
 //!
 //! ```
 //! use lidarcal::calib::rig::{calibrate, Cloud, Method, MethodOptions};
@@ -22,9 +23,10 @@
 //!     Method::Auto,
 //!     &MethodOptions::default(),
 //! )?;
-//! let (rotation_deg, translation_m) =
-//!     lidarcal::calib::targetless::pose_error(&scene.reference_from_target, result.reference_from_target());
-//! assert!(rotation_deg < 0.1 && translation_m < 0.02);
+//! let truth = &scene.reference_from_target;
+//! let (angle, distance) =
+//!     lidarcal::calib::targetless::pose_error(truth, result.reference_from_target());
+//! assert!(angle.to_degrees() < 0.1 && distance < 0.02);
 //! println!("{} chose {}", Method::Auto.name(), result.method().name());
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
