@@ -194,14 +194,15 @@ impl SurfaceCloud {
         (d2 <= max_distance * max_distance).then_some((n.data, d2))
     }
 
-    /// Fraction of `points` with a reference point within `distance`.
-    pub fn overlap(&self, points: &[Point3<f64>], distance: f64) -> f64 {
+    /// Fraction of `points`, mapped by `pose` (`reference_from_points`), with a reference point
+    /// within `distance`.
+    pub fn overlap(&self, points: &[Point3<f64>], pose: &Isometry3<f64>, distance: f64) -> f64 {
         if points.is_empty() {
             return 0.0;
         }
         let near = points
             .iter()
-            .filter(|p| self.nearest(p, distance).is_some())
+            .filter(|p| self.nearest(&(pose * *p), distance).is_some())
             .count();
         near as f64 / points.len() as f64
     }

@@ -292,9 +292,11 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     let scores: Vec<f64> = results
         .iter()
         .map(|c| {
-            let pose = c.reference_from_target();
-            let mapped: Vec<Point3<f64>> = target.points.iter().map(|p| pose * p).collect();
-            surface.overlap(&mapped, options.agreement_distance)
+            surface.overlap(
+                target.points,
+                c.reference_from_target(),
+                options.agreement_distance,
+            )
         })
         .collect();
     let best = scores.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -396,9 +398,14 @@ pub fn refine_pose_graph(
                     let mut delta = Vector6::zeros();
                     delta[d] = GRAPH_STEP;
                     let moved = |sign: f64| {
-                        let mut p = current.clone();
-                        p[node] = se3_exp(&(delta * sign)) * current[node];
-                        edge_error(&e.a_from_b, &p[e.a], &p[e.b])
+                        let step = se3_exp(&(delta * sign));
+                        let (mut pa, mut pb) = (current[e.a], current[e.b]);
+                        if node == e.a {
+                            pa = step * pa;
+                        } else {
+                            pb = step * pb;
+                        }
+                        edge_error(&e.a_from_b, &pa, &pb)
                     };
                     let column = (moved(1.0) - moved(-1.0)) / (2.0 * GRAPH_STEP);
                     for r in 0..6 {
@@ -630,6 +637,8 @@ pub fn calibrate_rig(
     }
     if options.pairwise {
         for a in 1..clouds.len() {
+            // Indexed once per target, on its first calibrated pair.
+            let mut surface: Option<SurfaceCloud> = None;
             for b in a + 1..clouds.len() {
                 let c = match calibrate(clouds[a], clouds[b], options.method, &options.methods) {
                     Ok(c) => c,
@@ -639,12 +648,16 @@ pub fn calibrate_rig(
                     }
                     Err(e) => return Err(e),
                 };
-                let surface = SurfaceCloud::new(clouds[a].points.to_vec())?;
-                let pose = c.reference_from_target();
-                let mapped: Vec<Point3<f64>> = clouds[b].points.iter().map(|p| pose * p).collect();
-                if surface.overlap(&mapped, options.methods.agreement_distance)
-                    < options.min_pair_overlap
-                {
+                let surface = match surface {
+                    Some(ref s) => s,
+                    None => surface.insert(SurfaceCloud::new(clouds[a].points.to_vec())?),
+                };
+                let shared = surface.overlap(
+                    clouds[b].points,
+                    c.reference_from_target(),
+                    options.methods.agreement_distance,
+                );
+                if shared < options.min_pair_overlap {
                     fail(a, b, "the two units barely overlap under the result".into());
                     continue;
                 }
@@ -701,21 +714,18 @@ pub fn calibrate_rig(
             })
             .collect()
     };
-    let measured: Vec<(usize, usize, Calibration)> = measured
+    let (measured, graph): (Vec<(usize, usize, Calibration)>, Vec<PoseGraphEdge>) = measured
         .into_iter()
-        .filter(|(a, b, _)| poses[*a].is_some() && poses[*b].is_some())
-        .collect();
-    let mut graph = Vec::with_capacity(measured.len());
-    for (a, b, c) in &measured {
-        if let (Some(ia), Some(ib)) = (index[*a], index[*b]) {
-            graph.push(PoseGraphEdge {
-                a: ia,
-                b: ib,
+        .filter_map(|(a, b, c)| {
+            let edge = PoseGraphEdge {
+                a: index[a]?,
+                b: index[b]?,
                 a_from_b: *c.reference_from_target(),
-                information: edge_information(c),
-            });
-        }
-    }
+                information: edge_information(&c),
+            };
+            Some(((a, b, c), edge))
+        })
+        .unzip();
     let start: Vec<Isometry3<f64>> = poses.iter().flatten().copied().collect();
     let refined = refine_pose_graph(&start, &graph, options.graph_iterations)?;
     let refined_of = |node: usize| index[node].and_then(|i| refined.get(i)).copied();

@@ -1167,7 +1167,7 @@ pub fn calibrate_targetless(
     ];
     let score = |pose: Isometry3<f64>,
                  [target_points, reference_points]: &[Vec<Point3<f64>>; 2]| {
-        let agreement = surface.overlap(&mapped(target_points, &pose), VERIFY_DISTANCE);
+        let agreement = surface.overlap(target_points, &pose, VERIFY_DISTANCE);
         let share = |count: usize, total: usize| count as f64 / total.max(1) as f64;
         let violations = [
             share(

@@ -972,8 +972,7 @@ fn overlap(
     }
     run(py, move || {
         let surface = crate::icp::SurfaceCloud::new(reference)?;
-        let mapped: Vec<_> = target.iter().map(|p| pose * p).collect();
-        Ok(surface.overlap(&mapped, distance))
+        Ok(surface.overlap(&target, &pose, distance))
     })
 }
 
