@@ -388,6 +388,11 @@ def _plot(
         raise click.ClickException(f"{png}: {e}") from e
 
 
+def _error_entry(reference: Source, target: Source, message: str) -> dict[str, Any]:
+    """The result entry of a target that could not be calibrated."""
+    return {"reference": reference.text, "target": target.text, "error": message}
+
+
 def _rig_entries(
     reference: Source,
     ref_points: np.ndarray,
@@ -395,7 +400,7 @@ def _rig_entries(
     method: str,
     options: dict[str, Any],
     plot: Path | None,
-) -> tuple[list[dict[str, Any]], list[str]]:
+) -> list[dict[str, Any]]:
     """`--rig`: every target to the reference and to each other, made consistent by the pose
     graph of :func:`lidarcal.calibrate_rig`. One entry per target, as without `--rig`, whose pose
     is the refined one; `rig` in each entry lists that target's edges and their residuals."""
@@ -406,9 +411,6 @@ def _rig_entries(
             name, k = f"{source.frame}_{k}", k + 1
         named[name] = (source, points)
 
-    def failed(source: Source, message: str) -> dict[str, Any]:
-        return {"reference": reference.text, "target": source.text, "error": message}
-
     try:
         rig = lidarcal.calibrate_rig(
             ref_points,
@@ -418,11 +420,8 @@ def _rig_entries(
             **_method_kwargs(options),
         )
     except (ValueError, CalibrationError) as e:
-        return [failed(s, str(e)) for s, _ in named.values()], [
-            f"{s.text}: {e}" for s, _ in named.values()
-        ]
+        return [_error_entry(reference, s, str(e)) for s, _ in named.values()]
     entries: list[dict[str, Any]] = []
-    failures: list[str] = []
     for name, (source, points) in named.items():
         touching = [e for e in rig.edges if name in (e.a, e.b) and e.result is not None]
         if name not in rig.transforms or not touching:
@@ -430,8 +429,7 @@ def _rig_entries(
                 f"{a} -> {b}: {m}" for (a, b), m in rig.failures.items() if name in (a, b)
             )
             message = f"not connected to the reference ({reasons})"
-            failures.append(f"{source.text}: {message}")
-            entries.append(failed(source, message))
+            entries.append(_error_entry(reference, source, message))
             continue
         # The direct edge when there is one, else the edge through which the target was placed.
         edge = next((e for e in touching if e.a == "reference"), touching[0])
@@ -466,7 +464,7 @@ def _rig_entries(
             )
             _plot(ref_points, points, rig.transforms[name], png, f"{source.path.name} (rig)")
             entry["plot"] = str(png)
-    return entries, failures
+    return entries
 
 
 @main.command()
@@ -602,21 +600,15 @@ def calibrate(
         raise click.ClickException(str(e)) from e
 
     entries: list[dict[str, Any]] = []
-    failures: list[str] = []
     if rig:
         loaded: list[tuple[Source, np.ndarray]] = []
         for target in targets:
             try:
                 loaded.append((target, load_cloud(target, crop_box, topic, bag_time)))
             except (ValueError, OSError) as e:
-                failures.append(f"{target.text}: {e}")
-                entries.append(
-                    {"reference": reference.text, "target": target.text, "error": str(e)}
-                )
+                entries.append(_error_entry(reference, target, str(e)))
         if loaded:
-            placed, unplaced = _rig_entries(reference, ref_points, loaded, method, options, plot)
-            entries.extend(placed)
-            failures.extend(unplaced)
+            entries.extend(_rig_entries(reference, ref_points, loaded, method, options, plot))
             order = {t.text: i for i, t in enumerate(targets)}
             entries.sort(key=lambda e: order.get(e["target"], 0))
     else:
@@ -637,10 +629,7 @@ def calibrate(
                     tgt_points = load_cloud(target, crop_box, topic, bag_time)
                     result = _calibrate(method, ref_points, tgt_points, options)
                 except (ValueError, OSError, CalibrationError) as e:
-                    failures.append(f"{target.text}: {e}")
-                    entries.append(
-                        {"reference": reference.text, "target": target.text, "error": str(e)}
-                    )
+                    entries.append(_error_entry(reference, target, str(e)))
                     continue
                 entry = to_dict(
                     result,
@@ -679,6 +668,7 @@ def calibrate(
             click.echo(_summary(entry, entry["reference_frame"], entry["target_frame"]))
         if output is not None and good:
             click.echo(f"wrote {output}")
+    failures = [f"{e['target']}: {e['error']}" for e in entries if "error" in e]
     for message in failures:
         click.echo(f"Error: {message}", err=True)
     if failures:
