@@ -22,7 +22,7 @@
 
 use std::time::{Duration, Instant};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, FailureKind, Result};
 
 /// A start time and an optional budget; [`Deadline::check`] fails once the budget is spent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,13 +47,16 @@ impl Deadline {
         };
         let elapsed = self.start.elapsed();
         if elapsed > budget {
-            return Err(Error::Calibration(format!(
+            return Err(Error::calibration(
+                FailureKind::TimeBudget,
+                format!(
                 "time budget of {:.3} s exhausted during {stage} (after {:.3} s): the input is \
                  too large or pathological for these options; raise the budget, subsample the \
                  clouds or tighten the options",
                 budget.as_secs_f64(),
                 elapsed.as_secs_f64()
-            )));
+            ),
+            ));
         }
         Ok(())
     }

@@ -19,9 +19,15 @@ pub enum Error {
     /// (e.g. parallel vectors given to Kabsch).
     #[error("degenerate input: {0}")]
     Degenerate(String),
-    /// A calibration could not produce a trustworthy result; the message says why.
-    #[error("calibration failed: {0}")]
-    Calibration(String),
+    /// A calibration could not produce a trustworthy result: `kind` says which way (callers can
+    /// branch on it), `message` says why in words.
+    #[error("calibration failed ({kind}): {message}")]
+    Calibration {
+        /// The kind of failure.
+        kind: FailureKind,
+        /// What was found, and what to change.
+        message: String,
+    },
     /// A numerical routine produced non-finite values (a bug or an extreme input).
     #[error("numerical failure: {0}")]
     Numerical(String),
@@ -37,6 +43,100 @@ pub enum Error {
     /// a corrupt compressed block); the message names the file and the problem.
     #[error("malformed file: {0}")]
     Format(String),
+}
+
+/// Why a calibration refused to return a result: the kind a caller can branch on. Its
+/// [`name`](FailureKind::name) is what Python's `CalibrationError.kind`, the CLI and the exports
+/// carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FailureKind {
+    /// More than one answer fits the data about equally well (a symmetric scene, a cube corner
+    /// without `up`, identical structures side by side).
+    Ambiguous,
+    /// The data do not constrain every degree of freedom (a corridor, parallel poles, a straight
+    /// street of ground and facades only).
+    Unobservable,
+    /// Fewer features than the method needs (planes, poles, bright points, overlapping points).
+    TooFewFeatures,
+    /// A pose was found but the clouds do not agree under it: the final check found it
+    /// inconsistent, or no hypothesis verified.
+    NoAgreement,
+    /// The pose lies outside what the options allow (beyond `max_translation`, an absurd pole
+    /// radius or fit residual).
+    OutOfRange,
+    /// The wall-clock budget ran out.
+    TimeBudget,
+    /// Two methods returned certified results that disagree beyond their uncertainty.
+    InconsistentMethods,
+}
+
+impl FailureKind {
+    /// Every kind, in declaration order.
+    pub const ALL: [FailureKind; 7] = [
+        FailureKind::Ambiguous,
+        FailureKind::Unobservable,
+        FailureKind::TooFewFeatures,
+        FailureKind::NoAgreement,
+        FailureKind::OutOfRange,
+        FailureKind::TimeBudget,
+        FailureKind::InconsistentMethods,
+    ];
+
+    /// `"ambiguous"`, `"unobservable"`, `"too_few_features"`, `"no_agreement"`,
+    /// `"out_of_range"`, `"time_budget"` or `"inconsistent_methods"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FailureKind::Ambiguous => "ambiguous",
+            FailureKind::Unobservable => "unobservable",
+            FailureKind::TooFewFeatures => "too_few_features",
+            FailureKind::NoAgreement => "no_agreement",
+            FailureKind::OutOfRange => "out_of_range",
+            FailureKind::TimeBudget => "time_budget",
+            FailureKind::InconsistentMethods => "inconsistent_methods",
+        }
+    }
+}
+
+impl std::fmt::Display for FailureKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Error {
+    /// An [`Error::Calibration`] of `kind`.
+    pub fn calibration(kind: FailureKind, message: impl Into<String>) -> Self {
+        Error::Calibration {
+            kind,
+            message: message.into(),
+        }
+    }
+
+    /// The failure kind of an [`Error::Calibration`], `None` for the other variants.
+    pub fn kind(&self) -> Option<FailureKind> {
+        match self {
+            Error::Calibration { kind, .. } => Some(*kind),
+            _ => None,
+        }
+    }
+
+    /// This error with `prefix: ` put before its message (the variant and kind kept).
+    pub fn context(self, prefix: &str) -> Self {
+        match self {
+            Error::InvalidInput(m) => Error::InvalidInput(format!("{prefix}: {m}")),
+            Error::Degenerate(m) => Error::Degenerate(format!("{prefix}: {m}")),
+            Error::Calibration { kind, message } => Error::Calibration {
+                kind,
+                message: format!("{prefix}: {message}"),
+            },
+            Error::Numerical(m) => Error::Numerical(format!("{prefix}: {m}")),
+            Error::Format(m) => Error::Format(format!("{prefix}: {m}")),
+            Error::Io { kind, message } => Error::Io {
+                kind,
+                message: format!("{prefix}: {message}"),
+            },
+        }
+    }
 }
 
 /// Shorthand for `Result<T, lidarcal::Error>`.

@@ -58,7 +58,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, SymmetricEigen, Vector3, Vec
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
 
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{ensure_finite, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::se3_exp;
 use crate::lm::{accumulate, Accumulator, Loss, NormalEquations};
@@ -389,11 +389,14 @@ pub fn point_to_plane_icp(
         iterations += 1;
         let sums = linearise(reference, &samples, &pose, distance);
         if sums.matched < 6 {
-            return Err(Error::Calibration(format!(
-                "ICP found only {} correspondences within {distance:.2} m: the clouds do not \
+            return Err(Error::calibration(
+                FailureKind::TooFewFeatures,
+                format!(
+                    "ICP found only {} correspondences within {distance:.2} m: the clouds do not \
                  overlap at this pose",
-                sums.matched
-            )));
+                    sums.matched
+                ),
+            ));
         }
         let h = sums.ne.hessian;
         // A floor on the damping keeps unobserved directions (a corridor) from moving.
@@ -508,7 +511,7 @@ mod tests {
                 &Isometry3::identity(),
                 &IcpOptions::default()
             ),
-            Err(Error::Calibration(_))
+            Err(Error::Calibration { .. })
         ));
         assert!(SurfaceCloud::new(pts[..3].to_vec()).is_err());
     }

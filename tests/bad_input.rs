@@ -33,7 +33,7 @@ fn message_of<T: std::fmt::Debug>(r: lidarcal::Result<T>) -> Error {
 
 fn assert_variant(e: &Error, invalid_input: bool, fragment: &str) {
     let is_invalid = matches!(e, Error::InvalidInput(_));
-    let is_calibration = matches!(e, Error::Calibration(_));
+    let is_calibration = matches!(e, Error::Calibration { .. });
     assert!(
         if invalid_input {
             is_invalid

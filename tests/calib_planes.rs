@@ -107,7 +107,7 @@ fn cube_corner_is_ambiguous_without_up_and_solved_with_it() {
     let reference = cube_corner(1);
     let target: Vec<_> = cube_corner(2).iter().map(|p| truth.inverse() * p).collect();
     let err = calibrate_planes(&reference, &target, &PlanarOptions::default()).unwrap_err();
-    assert!(matches!(err, Error::Calibration(_)));
+    assert!(matches!(err, Error::Calibration { .. }));
     assert!(
         err.to_string().contains("ambiguous plane correspondence"),
         "{err}"
@@ -145,7 +145,7 @@ fn parallel_planes_and_missing_planes_are_refused() {
     }
     // The second wall is discarded as parallel to the first and no third plane remains.
     let err = calibrate_planes(&pts, &pts, &PlanarOptions::default()).unwrap_err();
-    assert!(matches!(err, Error::Calibration(_)), "{err}");
+    assert!(matches!(err, Error::Calibration { .. }), "{err}");
     assert!(
         err.to_string().contains("discarded as nearly parallel"),
         "{err}"
@@ -153,7 +153,7 @@ fn parallel_planes_and_missing_planes_are_refused() {
 
     let floor: Vec<_> = pts[4000..].to_vec();
     let err = calibrate_planes(&floor, &floor, &PlanarOptions::default()).unwrap_err();
-    assert!(matches!(err, Error::Calibration(_)), "{err}");
+    assert!(matches!(err, Error::Calibration { .. }), "{err}");
     assert!(
         err.to_string().contains("reference cloud: only 1 plane(s)"),
         "{err}"
@@ -173,7 +173,7 @@ fn different_scenes_are_not_silently_aligned() {
     let (reference, _) = two_sensor_corner(&truth, 2000, 0, 0.01, 7);
     let target = cube_corner(9);
     match calibrate_planes(&reference, &target, &PlanarOptions::default()) {
-        Err(Error::Calibration(m)) => {
+        Err(Error::Calibration { message: m, .. }) => {
             assert!(m.contains("do not agree") || m.contains("ambiguous"), "{m}")
         }
         Err(e) => panic!("unexpected error {e}"),

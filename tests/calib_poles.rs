@@ -5,7 +5,7 @@ use lidarcal::calib::poles::{calibrate_poles, AxisFit, PoleCalibration, PoleOpti
 use lidarcal::sim::scenes::{poles_scene, PolesOptions, Scene, POLE_PAINT};
 use lidarcal::sim::shapes::{Cylinder, IntensityRange, Rectangle, Shape};
 use lidarcal::sim::{scan, BeamModel, Preset, Scan, ScanOptions};
-use lidarcal::{Error, Result};
+use lidarcal::{Error, FailureKind, Result};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 fn split(scan: &Scan) -> (Vec<Point3<f64>>, Vec<f64>) {
@@ -279,12 +279,12 @@ fn clear_errors() {
     let dark: Vec<f64> = ri.iter().map(|v| v.min(80.0)).collect();
     let e = calibrate_poles(&r, &dark, &t, &ti, &o).unwrap_err();
     assert!(
-        matches!(&e, Error::Calibration(m) if m.contains("bright point")),
+        matches!(&e, Error::Calibration { message: m, kind: FailureKind::TooFewFeatures } if m.contains("bright point")),
         "{e}"
     );
     // Neither vendor nor threshold: no clear bright class either.
     let e = calibrate_poles(&r, &dark, &t, &ti, &PoleOptions::default()).unwrap_err();
-    assert!(matches!(&e, Error::Calibration(_)), "{e}");
+    assert!(matches!(&e, Error::Calibration { .. }), "{e}");
 
     // One pole: drop the tape of the second.
     let one: Vec<f64> = ri
@@ -354,7 +354,7 @@ fn a_symmetric_scene_is_refused() {
     // refuses (as for a cloud cropped to the poles, the share limit is lifted).
     let e = calibrate_poles(&r, &ri, &t, &ti, &velodyne()).unwrap_err();
     assert!(
-        matches!(&e, Error::Calibration(m) if m.contains("max_bright_fraction")),
+        matches!(&e, Error::Calibration { message: m, .. } if m.contains("max_bright_fraction")),
         "{e}"
     );
     let lifted = PoleOptions {
@@ -363,7 +363,7 @@ fn a_symmetric_scene_is_refused() {
     };
     let e = calibrate_poles(&r, &ri, &t, &ti, &lifted).unwrap_err();
     assert!(
-        matches!(&e, Error::Calibration(m) if m.contains("ambiguous pole correspondence")),
+        matches!(&e, Error::Calibration { message: m, kind: FailureKind::Ambiguous } if m.contains("ambiguous pole correspondence")),
         "{e}"
     );
 }
@@ -387,7 +387,7 @@ fn a_threshold_that_makes_most_returns_tape_is_refused() {
             ..PoleOptions::default()
         };
         match run(&scene, &everything) {
-            Err(Error::Calibration(m)) => {
+            Err(Error::Calibration { message: m, .. }) => {
                 assert!(m.contains("100.0 % of the returns as tape"), "{m}");
                 assert!(m.contains("data-driven threshold is"), "{m}");
             }

@@ -88,7 +88,7 @@ fn auto_tries_the_poles_only_with_intensity() {
     );
     match without {
         Ok(c) => assert_ne!(c.method(), Method::Poles),
-        Err(Error::Calibration(m)) => {
+        Err(Error::Calibration { message: m, .. }) => {
             assert!(m.contains("planes:") && m.contains("targetless:") && !m.contains("poles:"))
         }
         Err(e) => panic!("{e}"),
@@ -115,7 +115,7 @@ fn auto_lists_every_reason_and_passes_malformed_input_through() {
         Method::Auto,
         &MethodOptions::default(),
     ) {
-        Err(Error::Calibration(m)) => {
+        Err(Error::Calibration { message: m, .. }) => {
             assert!(m.starts_with("no method calibrated this pair"), "{m}");
             assert!(m.contains("planes:") && m.contains("targetless:"), "{m}");
         }

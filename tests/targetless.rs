@@ -99,13 +99,14 @@ fn corridor_is_refused_with_the_direction() {
         &TargetlessOptions::default(),
     )
     .unwrap_err();
-    let Error::Calibration(message) = &err else {
+    let Error::Calibration { message, kind } = &err else {
         panic!("expected a calibration error, got {err:?}");
     };
     assert!(
         message.contains("does not constrain the translation along"),
         "{message}"
     );
+    assert_eq!(*kind, lidarcal::FailureKind::Unobservable);
     // The corridor runs along the world x axis; the reference sensor is turned by at most
     // 0.2 rad, so the named direction is close to its own x axis.
     let start = message.find('[').unwrap();

@@ -41,7 +41,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
-use crate::error::{Error, Result};
+use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::se3_log;
 use crate::geometry::Plane;
@@ -200,11 +200,14 @@ pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
         let (_, quartile, _) = residuals.select_nth_unstable_by(q, |a, b| a.total_cmp(b));
         let sigma = *quartile / GAUSSIAN_ABS_QUARTILE;
         if 3.0 * sigma > THRESHOLD_RANGE.1 {
-            return Err(Error::Calibration(format!(
-                "no clearly planar surface: the points around the largest plane spread by \
+            return Err(Error::calibration(
+                FailureKind::TooFewFeatures,
+                format!(
+                    "no clearly planar surface: the points around the largest plane spread by \
                  {sigma:.2} m (3 sigma > {} m); pass distance_threshold to override",
-                THRESHOLD_RANGE.1
-            )));
+                    THRESHOLD_RANGE.1
+                ),
+            ));
         }
         threshold = (3.0 * sigma).max(THRESHOLD_RANGE.0);
     }
@@ -223,11 +226,14 @@ fn check_conditioning(planes: &[Plane; 3], which: &str) -> Result<()> {
         let angle =
             |u: &Vector3<f64>, v: &Vector3<f64>| u.dot(v).abs().min(1.0).acos().to_degrees();
         let closest = angle(&a, &b).min(angle(&a, &c)).min(angle(&b, &c));
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
             "the three planes of the {which} cloud are not linearly independent: smallest singular \
              value of the normals {smallest:.3} < {MIN_NORMAL_SINGULAR_VALUE} (two planes are \
              {closest:.1} deg from parallel, or all three share a direction)"
-        )));
+        ),
+        ));
     }
     Ok(())
 }
@@ -237,10 +243,12 @@ fn corner(planes: &[Plane; 3]) -> Result<Point3<f64>> {
     let [a, b, c] = normals(planes);
     let m = Matrix3::from_rows(&[a.transpose(), b.transpose(), c.transpose()]);
     let rhs = Vector3::new(-planes[0].offset, -planes[1].offset, -planes[2].offset);
-    m.lu()
-        .solve(&rhs)
-        .map(Point3::from)
-        .ok_or_else(|| Error::Calibration("the three planes do not meet in a point".into()))
+    m.lu().solve(&rhs).map(Point3::from).ok_or_else(|| {
+        Error::calibration(
+            FailureKind::TooFewFeatures,
+            "the three planes do not meet in a point",
+        )
+    })
 }
 
 /// Puts three planes (with their inliers) in right-handed order: `(n0 x n1) . n2 > 0`.
@@ -321,9 +329,10 @@ fn irls(
 /// Prefixes calibration errors with the cloud they concern.
 fn with_cloud(e: Error, which: &str) -> Error {
     match e {
-        Error::Calibration(m) | Error::Degenerate(m) => {
-            Error::Calibration(format!("{which} cloud: {m}"))
+        Error::Degenerate(m) => {
+            Error::calibration(FailureKind::TooFewFeatures, format!("{which} cloud: {m}"))
         }
+        e @ Error::Calibration { .. } => e.context(&format!("{which} cloud")),
         other => other,
     }
 }
@@ -331,10 +340,10 @@ fn with_cloud(e: Error, which: &str) -> Error {
 fn to_array<T: Clone>(v: &[T]) -> Result<[T; 3]> {
     match v {
         [a, b, c] => Ok([a.clone(), b.clone(), c.clone()]),
-        _ => Err(Error::Calibration(format!(
-            "expected 3 planes, got {}",
-            v.len()
-        ))),
+        _ => Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!("expected 3 planes, got {}", v.len()),
+        )),
     }
 }
 
@@ -396,14 +405,17 @@ fn match_planes(
     let mut used_up = false;
     if margin < AMBIGUITY_RMS {
         let Some((up_ref, up_tgt)) = up else {
-            return Err(Error::Calibration(format!(
-                "ambiguous plane correspondence: two orderings fit the normals equally well \
+            return Err(Error::calibration(
+                FailureKind::Ambiguous,
+                format!(
+                    "ambiguous plane correspondence: two orderings fit the normals equally well \
                  (RMS misalignment {:.3} and {:.3} deg; the corner's angles are nearly equal, \
                  as in a cube corner); pass `up`, the gravity direction in each sensor's frame, \
                  to break the tie",
-                scores[order[0]].to_degrees(),
-                scores[order[1]].to_degrees()
-            )));
+                    scores[order[0]].to_degrees(),
+                    scores[order[1]].to_degrees()
+                ),
+            ));
         };
         if up_ref.norm() == 0.0 || up_tgt.norm() == 0.0 {
             return Err(Error::InvalidInput("up vectors must be non-zero".into()));
@@ -420,12 +432,15 @@ fn match_planes(
         let mut by_up = candidates.clone();
         by_up.sort_by(|&i, &j| up_error(i).total_cmp(&up_error(j)));
         if by_up.len() > 1 && up_error(by_up[1]) - up_error(by_up[0]) < UP_TIE_BREAK_MARGIN {
-            return Err(Error::Calibration(format!(
-                "ambiguous plane correspondence, and `up` does not break the tie (up errors \
+            return Err(Error::calibration(
+                FailureKind::Ambiguous,
+                format!(
+                    "ambiguous plane correspondence, and `up` does not break the tie (up errors \
                  {:.1} and {:.1} deg)",
-                up_error(by_up[0]).to_degrees(),
-                up_error(by_up[1]).to_degrees()
-            )));
+                    up_error(by_up[0]).to_degrees(),
+                    up_error(by_up[1]).to_degrees()
+                ),
+            ));
         }
         chosen = by_up[0];
         used_up = true;
@@ -592,11 +607,14 @@ pub fn calibrate_planes(
         rmse[i] = ((a * a * n_t + b * b * n_r) / (n_t + n_r)).sqrt();
         let limit = 2.0 * thresholds[0].max(thresholds[1]);
         if options.refine && rmse[i] > limit {
-            return Err(Error::Calibration(format!(
+            return Err(Error::calibration(
+                FailureKind::NoAgreement,
+                format!(
                 "the matched planes do not agree after refinement: plane {i} has an RMS residual \
                  of {:.3} m (> {limit:.3} m); the two clouds may not show the same corner",
                 rmse[i]
-            )));
+            ),
+            ));
         }
     }
     let covariance = report.as_ref().and_then(|r| r.covariance());

@@ -93,7 +93,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
 use crate::cluster::{euclidean_clusters_until, Grid};
-use crate::error::{Error, Result};
+use crate::error::{Error, FailureKind, Result};
 use crate::fit::cylinder::fit_cylinder;
 use crate::fit::Moments;
 use crate::geometry::{Line, Plane};
@@ -375,8 +375,9 @@ pub fn data_threshold(intensities: &[f64]) -> Result<f64> {
         .filter(|x| x.is_finite())
         .collect();
     if v.len() < 2 {
-        return Err(Error::Calibration(
-            "too few intensities to choose a threshold".into(),
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            "too few intensities to choose a threshold",
         ));
     }
     v.sort_by(|a, b| a.total_cmp(b));
@@ -390,13 +391,16 @@ pub fn data_threshold(intensities: &[f64]) -> Result<f64> {
         }
     }
     if range <= 0.0 || best.0 < MIN_INTENSITY_GAP * range {
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
             "no clear class of bright (retro-reflective) returns: the widest intensity gap above \
              the median is {:.1} of a range {lo:.1}..{hi:.1} (need {:.0} %); pass \
              intensity_threshold or vendor",
             best.0,
             MIN_INTENSITY_GAP * 100.0
-        )));
+        ),
+        ));
     }
     Ok(best.1)
 }
@@ -518,12 +522,15 @@ fn extract_poles_until(
             .iter()
             .copied()
             .fold(f64::NEG_INFINITY, f64::max);
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
             "only {} bright point(s) at or above intensity {threshold:.1} (need {} per pole; the \
              highest intensity is {max:.1}): no taped poles visible, or the threshold is too high",
             bright.len(),
             options.min_points
-        )));
+        ),
+        ));
     }
     let share = bright.len() as f64 / points.len() as f64;
     if share > options.max_bright_fraction {
@@ -531,14 +538,17 @@ fn extract_poles_until(
             Ok(t) => format!("this cloud's data-driven threshold is {t:.1}"),
             Err(_) => "this cloud has no clear bright class either".into(),
         };
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
             "intensity threshold {threshold:.1} marks {:.1} % of the returns as tape (more than \
              {:.0} %): tape is a small part of a scene, so this threshold does not separate it; \
              raise it ({suggestion}), or, for a cloud cropped to the poles, raise \
              max_bright_fraction",
             100.0 * share,
             100.0 * options.max_bright_fraction
-        )));
+        ),
+        ));
     }
     let bright_points: Vec<Point3<f64>> = bright.iter().map(|&i| points[i]).collect();
     let clusters = euclidean_clusters_until(&bright_points, options.cluster_tolerance, deadline)?;
@@ -938,8 +948,12 @@ pub fn calibrate_poles(
         poles_tgt: &ext_tgt.poles,
     };
     // The base pair of reference poles: the first non-parallel pair, largest poles first.
-    let base = base_pair(&ext_ref.poles)
-        .ok_or_else(|| Error::Calibration("reference cloud: the poles are parallel".into()))?;
+    let base = base_pair(&ext_ref.poles).ok_or_else(|| {
+        Error::calibration(
+            FailureKind::Unobservable,
+            "reference cloud: the poles are parallel",
+        )
+    })?;
     let mut bases = Vec::new();
     for k0 in 0..ext_tgt.poles.len() {
         for k1 in 0..ext_tgt.poles.len() {
@@ -1034,8 +1048,9 @@ pub fn calibrate_poles(
     let mut order: Vec<usize> = (0..hypotheses.len()).collect();
     order.sort_by(|&a, &b| hypotheses[a].score.total_cmp(&hypotheses[b].score));
     let Some(&chosen) = order.first() else {
-        return Err(Error::Calibration(
-            "no pair of non-parallel target poles to match".into(),
+        return Err(Error::calibration(
+            FailureKind::Unobservable,
+            "no pair of non-parallel target poles to match",
         ));
     };
     // The runner-up is the best hypothesis that reached a different transform: hypotheses that
@@ -1050,7 +1065,7 @@ pub fn calibrate_poles(
     });
     if let Some(j) = runner_up.filter(|_| margin < REFUSE_MARGIN) {
         let (a, b) = (&hypotheses[chosen], &hypotheses[j]);
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(FailureKind::Ambiguous, format!(
             "ambiguous pole correspondence: the best two hypotheses score {:.3} and {:.3} \
              (margin {margin:.3} < {REFUSE_MARGIN}; axis RMS {:.4} / {:.4} m, overlap {:.3} / {:.3}); \
              the scene is symmetric (e.g. two vertical poles on flat ground with nothing else)",
@@ -1153,7 +1168,7 @@ fn check_poles(extraction: &PoleExtraction, which: &str) -> Result<()> {
         }
     };
     if n < 2 {
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(FailureKind::TooFewFeatures, format!(
             "{which} cloud: found {n} pole(s) among {} bright points (intensity >= {:.1}); need two \
              non-parallel taped poles{}",
             extraction.bright_points,
@@ -1166,21 +1181,25 @@ fn check_poles(extraction: &PoleExtraction, which: &str) -> Result<()> {
             .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
             .map(|(i, j)| angle_between_lines(&extraction.poles[i].axis, &extraction.poles[j].axis))
             .fold(0.0, f64::max);
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::Unobservable,
+            format!(
             "{which} cloud: the {n} poles are parallel within {:.1} deg (widest angle {:.2} deg): \
              they do not determine the rotation about them",
             MIN_POLE_ANGLE.to_degrees(),
             widest.to_degrees()
-        )));
+        ),
+        ));
     }
     Ok(())
 }
 
 fn with_cloud(e: Error, which: &str) -> Error {
     match e {
-        Error::Calibration(m) | Error::Degenerate(m) => {
-            Error::Calibration(format!("{which} cloud: {m}"))
+        Error::Degenerate(m) => {
+            Error::calibration(FailureKind::TooFewFeatures, format!("{which} cloud: {m}"))
         }
+        e @ Error::Calibration { .. } => e.context(&format!("{which} cloud")),
         Error::InvalidInput(m) => Error::InvalidInput(format!("{which} cloud: {m}")),
         other => other,
     }
@@ -1218,7 +1237,10 @@ mod tests {
         let t = data_threshold(&v).unwrap();
         assert!(t > 80.0 && t < 235.0, "{t}");
         let flat: Vec<f64> = (0..1000).map(|i| (i % 256) as f64).collect();
-        assert!(matches!(data_threshold(&flat), Err(Error::Calibration(_))));
+        assert!(matches!(
+            data_threshold(&flat),
+            Err(Error::Calibration { .. })
+        ));
     }
 
     #[test]

@@ -38,7 +38,7 @@ use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
 use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
 use crate::geometry::{se3_exp, se3_log};
 use crate::icp::SurfaceCloud;
-use crate::{Error, Result};
+use crate::{Error, FailureKind, Result};
 
 /// Distance (m) within which a mapped target point counts as agreeing with the reference cloud,
 /// for [`Method::Auto`] and for the overlap test of a target pair in [`calibrate_rig`].
@@ -275,15 +275,14 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     for method in candidates {
         match run_one(reference, target, method, options) {
             Ok(c) => results.push(c),
-            Err(Error::Calibration(why)) => reasons.push(format!("{}: {why}", method.name())),
+            Err(Error::Calibration { kind, message }) => {
+                reasons.push((kind, format!("{}: {message}", method.name())))
+            }
             Err(e) => return Err(e),
         }
     }
     if results.is_empty() {
-        return Err(Error::Calibration(format!(
-            "no method calibrated this pair ({})",
-            reasons.join("; ")
-        )));
+        return Err(no_method_error(&reasons));
     }
     if results.len() == 1 {
         return Ok(results.remove(0));
@@ -305,6 +304,31 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
         .position(|s| *s >= best - options.auto_tie)
         .unwrap_or(0);
     Ok(results.swap_remove(pick))
+}
+
+/// The error when every method of [`Method::Auto`] refused: the kind of the method that got
+/// furthest (a scene found ambiguous or unobservable says more than another method's missing
+/// features), every method's reason in the message.
+fn no_method_error(reasons: &[(FailureKind, String)]) -> Error {
+    let rank = |k: FailureKind| match k {
+        FailureKind::InconsistentMethods => 0,
+        FailureKind::Ambiguous => 1,
+        FailureKind::Unobservable => 2,
+        FailureKind::OutOfRange => 3,
+        FailureKind::NoAgreement => 4,
+        FailureKind::TimeBudget => 5,
+        FailureKind::TooFewFeatures => 6,
+    };
+    let kind = reasons
+        .iter()
+        .map(|(k, _)| *k)
+        .min_by_key(|k| rank(*k))
+        .unwrap_or(FailureKind::TooFewFeatures);
+    let text: Vec<&str> = reasons.iter().map(|(_, m)| m.as_str()).collect();
+    Error::calibration(
+        kind,
+        format!("no method calibrated this pair ({})", text.join("; ")),
+    )
 }
 
 /// An edge of a pose graph: a measurement of `a_from_b` between nodes `a` and `b`.
@@ -547,6 +571,8 @@ pub struct RigFailure {
     pub b: String,
     /// The reason.
     pub reason: String,
+    /// Its kind (`None` only for a pair calibrated but barely overlapping).
+    pub kind: Option<FailureKind>,
 }
 
 /// The calibrated rig.
@@ -617,11 +643,12 @@ pub fn calibrate_rig(
         .collect();
     let mut measured: Vec<(usize, usize, Calibration)> = Vec::new();
     let mut failures = Vec::new();
-    let mut fail = |a: usize, b: usize, reason: String| {
+    let mut fail = |a: usize, b: usize, kind: Option<FailureKind>, reason: String| {
         failures.push(RigFailure {
             a: names[a].to_string(),
             b: names[b].to_string(),
             reason,
+            kind,
         })
     };
     let mut direct = Vec::new();
@@ -631,7 +658,7 @@ pub fn calibrate_rig(
                 direct.push((names[b].to_string(), *c.reference_from_target()));
                 measured.push((0, b, c));
             }
-            Err(Error::Calibration(why)) => fail(0, b, why),
+            Err(Error::Calibration { kind, message }) => fail(0, b, Some(kind), message),
             Err(e) => return Err(e),
         }
     }
@@ -642,8 +669,8 @@ pub fn calibrate_rig(
             for b in a + 1..clouds.len() {
                 let c = match calibrate(clouds[a], clouds[b], options.method, &options.methods) {
                     Ok(c) => c,
-                    Err(Error::Calibration(why)) => {
-                        fail(a, b, why);
+                    Err(Error::Calibration { kind, message }) => {
+                        fail(a, b, Some(kind), message);
                         continue;
                     }
                     Err(e) => return Err(e),
@@ -658,7 +685,12 @@ pub fn calibrate_rig(
                     options.methods.agreement_distance,
                 );
                 if shared < options.min_pair_overlap {
-                    fail(a, b, "the two units barely overlap under the result".into());
+                    fail(
+                        a,
+                        b,
+                        None,
+                        "the two units barely overlap under the result".into(),
+                    );
                     continue;
                 }
                 measured.push((a, b, c));
@@ -695,11 +727,20 @@ pub fn calibrate_rig(
             .iter()
             .map(|f| format!("{}->{}: {}", f.a, f.b, f.reason))
             .collect();
-        return Err(Error::Calibration(format!(
-            "could not connect {} to the reference ({})",
-            unconnected.join(", "),
-            reasons.join("; ")
-        )));
+        // The kind of the first unconnected target's own failure against the reference.
+        let kind = failures
+            .iter()
+            .find(|f| f.a == REFERENCE && unconnected.contains(&f.b))
+            .and_then(|f| f.kind)
+            .unwrap_or(FailureKind::TooFewFeatures);
+        return Err(Error::calibration(
+            kind,
+            format!(
+                "could not connect {} to the reference ({})",
+                unconnected.join(", "),
+                reasons.join("; ")
+            ),
+        ));
     }
     // The graph over the placed nodes only (edges between unplaced targets cannot be used).
     let index: Vec<Option<usize>> = {

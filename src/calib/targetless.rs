@@ -85,7 +85,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 
 use super::planes::estimate_threshold;
 use super::{Stopwatch, Timings};
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{ensure_finite, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::{rotation_angle, Plane};
 use crate::icp::{
@@ -388,7 +388,7 @@ fn prepare(points: &[Point3<f64>], options: &TargetlessOptions) -> Result<Prepar
         Some(t) => t,
         None => match estimate_threshold(&ds, options.seed) {
             Ok(t) => t.clamp(ESTIMATED_THRESHOLD_RANGE.0, ESTIMATED_THRESHOLD_RANGE.1),
-            Err(Error::Calibration(_)) => ESTIMATED_THRESHOLD_RANGE.1,
+            Err(Error::Calibration { .. }) => ESTIMATED_THRESHOLD_RANGE.1,
             Err(e) => return Err(e),
         },
     };
@@ -1115,17 +1115,20 @@ pub fn calibrate_targetless(
     for (prepared, which) in [(&reference_ds, "reference"), (&target_ds, "target")] {
         let needed = if options.ground_sweep { 1 } else { 2 };
         if prepared.features.len() < needed {
-            return Err(Error::Calibration(format!(
-                "the {which} cloud shows {} plane(s) with at least {} inliers; the targetless \
+            return Err(Error::calibration(
+                FailureKind::TooFewFeatures,
+                format!(
+                    "the {which} cloud shows {} plane(s) with at least {} inliers; the targetless \
                  method needs {}",
-                prepared.features.len(),
-                options.min_inliers,
-                if options.ground_sweep {
-                    "a plane both sensors see (the ground)"
-                } else {
-                    "two non-parallel planes seen by both sensors"
-                }
-            )));
+                    prepared.features.len(),
+                    options.min_inliers,
+                    if options.ground_sweep {
+                        "a plane both sensors see (the ground)"
+                    } else {
+                        "two non-parallel planes seen by both sensors"
+                    }
+                ),
+            ));
         }
     }
 
@@ -1136,13 +1139,16 @@ pub fn calibrate_targetless(
         Vec::new()
     };
     if candidates.is_empty() && sweep.is_empty() {
-        return Err(Error::Calibration(format!(
-            "no pair of non-parallel planes matches between the clouds ({} reference and {} \
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
+                "no pair of non-parallel planes matches between the clouds ({} reference and {} \
              target planes; normals must agree within {:.1} deg)",
-            reference_ds.features.len(),
-            target_ds.features.len(),
-            options.normal_tolerance.to_degrees()
-        )));
+                reference_ds.features.len(),
+                target_ds.features.len(),
+                options.normal_tolerance.to_degrees()
+            ),
+        ));
     }
     clock.lap("hypotheses");
 
@@ -1247,8 +1253,9 @@ pub fn calibrate_targetless(
     let verified: Vec<Option<Verified>> = kept.iter().map(verify_one).collect();
     let ranked = rank(&verified);
     let Some(&(best, _)) = ranked.first() else {
-        return Err(Error::Calibration(
-            "no plane hypothesis brings the clouds into agreement (ICP found no overlap)".into(),
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            "no plane hypothesis brings the clouds into agreement (ICP found no overlap)",
         ));
     };
     let (Some(Some(mut top)), Some(&winner)) = (
@@ -1293,14 +1300,17 @@ pub fn calibrate_targetless(
     }
     let (polished, best_score) = (top.pose, top.score);
     if best_score <= 0.0 {
-        return Err(Error::Calibration(format!(
-            "no hypothesis brings the clouds into agreement: the best verified pose agrees on \
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            format!(
+                "no hypothesis brings the clouds into agreement: the best verified pose agrees on \
              {:.1} % of the target points and puts {:.1} % / {:.1} % of the points into space \
              the other sensor saw through",
-            100.0 * top.agreement,
-            100.0 * top.violations[0],
-            100.0 * top.violations[1]
-        )));
+                100.0 * top.agreement,
+                100.0 * top.violations[0],
+                100.0 * top.violations[1]
+            ),
+        ));
     }
     let second_score = runner_up.map_or(0.0, |r| r.score.max(0.0));
     let ambiguous = second_score >= AMBIGUITY_RATIO * best_score;
@@ -1399,7 +1409,9 @@ pub fn calibrate_targetless(
     };
     let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
     if weakest_translation.1 < options.min_information_share {
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::Unobservable,
+            format!(
             "the scene does not constrain the translation along {} (reference frame): it holds \
              {:.2} % of the translation information of {source} (< {:.2} %); the matched planes' \
              normals span {} direction(s) (as in a corridor or a straight street with only \
@@ -1415,29 +1427,36 @@ pub fn calibrate_targetless(
             } else {
                 1
             },
-        )));
+        ),
+        ));
     }
     if weakest_rotation.1 < options.min_information_share {
-        return Err(Error::Calibration(format!(
-            "the scene does not constrain the rotation about {} (reference frame): it holds \
+        return Err(Error::calibration(
+            FailureKind::Unobservable,
+            format!(
+                "the scene does not constrain the rotation about {} (reference frame): it holds \
              {:.2} % of the rotation information of {source} (< {:.2} %)",
-            fmt(&weakest_rotation.0),
-            100.0 * weakest_rotation.1,
-            100.0 * options.min_information_share
-        )));
+                fmt(&weakest_rotation.0),
+                100.0 * weakest_rotation.1,
+                100.0 * options.min_information_share
+            ),
+        ));
     }
     let moved = pose.translation.vector.norm();
     if moved > options.max_translation {
-        return Err(Error::Calibration(format!(
-            "the best pose puts the target {moved:.2} m from the reference, beyond \
+        return Err(Error::calibration(
+            FailureKind::OutOfRange,
+            format!(
+                "the best pose puts the target {moved:.2} m from the reference, beyond \
              max_translation ({:.2} m): every hypothesis started within it and ICP carried the \
              target away (the clouds agree best where the sensors cannot be)",
-            options.max_translation
-        )));
+                options.max_translation
+            ),
+        ));
     }
 
     if let Some(message) = ambiguity {
-        return Err(Error::Calibration(message));
+        return Err(Error::calibration(FailureKind::Ambiguous, message));
     }
 
     // Matched planes, their input indices and residuals at the result.

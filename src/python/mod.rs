@@ -41,8 +41,11 @@ impl From<Error> for PyErr {
     fn from(e: Error) -> PyErr {
         match e {
             Error::InvalidInput(m) | Error::Degenerate(m) => PyValueError::new_err(m),
-            Error::Calibration(m) => CalibrationError::new_err(m),
-            Error::Numerical(m) => CalibrationError::new_err(format!("numerical failure: {m}")),
+            Error::Calibration { kind, message } => calibration_error(kind, message),
+            Error::Numerical(m) => calibration_error(
+                crate::FailureKind::NoAgreement,
+                format!("numerical failure: {m}"),
+            ),
             Error::Io { kind, message } => match kind {
                 std::io::ErrorKind::NotFound => PyFileNotFoundError::new_err(message),
                 std::io::ErrorKind::PermissionDenied => PyPermissionError::new_err(message),
@@ -52,6 +55,17 @@ impl From<Error> for PyErr {
             Error::Format(m) => FileFormatError::new_err(m),
         }
     }
+}
+
+/// A `CalibrationError` whose `kind` attribute is the failure kind's name.
+fn calibration_error(kind: crate::FailureKind, message: String) -> PyErr {
+    let err = CalibrationError::new_err(message);
+    Python::attach(|py| {
+        // Setting an attribute on a fresh exception instance cannot fail in practice; if it
+        // did, the error would still carry its message.
+        let _ = err.value(py).setattr("kind", kind.name());
+    });
+    err
 }
 
 /// Runs `f` with the GIL released, turning its `Err` into an exception and any panic (a bug) into a

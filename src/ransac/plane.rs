@@ -13,7 +13,7 @@ use nalgebra::Point3;
 use super::consensus::{ransac, Score, GROUP};
 use super::kernel;
 use super::{Cloud, Estimator, RansacOptions, RansacResult};
-use crate::error::{Error, Result};
+use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::Plane;
 
@@ -259,7 +259,9 @@ pub fn extract_planes(
         found.push((result.model, result.hypotheses));
     }
     if found.len() < options.count {
-        return Err(Error::Calibration(format!(
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
             "only {} plane(s) with at least {min_inliers} inliers within {threshold} m were found, \
              {} wanted{}",
             found.len(),
@@ -269,7 +271,8 @@ pub fn extract_planes(
             } else {
                 String::new()
             }
-        )));
+        ),
+        ));
     }
 
     let mut planes: Vec<Plane> = found.iter().map(|(p, _)| *p).collect();
@@ -299,10 +302,13 @@ pub fn extract_planes(
         })
         .collect();
     if let Some(weak) = extracted.iter().find(|p| p.inliers.len() < min_inliers) {
-        return Err(Error::Calibration(format!(
-            "after the joint refinement a plane keeps only {} inliers (< {min_inliers})",
-            weak.inliers.len()
-        )));
+        return Err(Error::calibration(
+            FailureKind::TooFewFeatures,
+            format!(
+                "after the joint refinement a plane keeps only {} inliers (< {min_inliers})",
+                weak.inliers.len()
+            ),
+        ));
     }
     extracted.sort_by_key(|p| std::cmp::Reverse(p.inliers.len()));
     Ok(extracted)
