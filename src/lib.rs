@@ -78,6 +78,7 @@
 
 pub mod budget;
 pub mod calib;
+pub mod check;
 pub mod cluster;
 pub mod error;
 pub mod fit;

@@ -16,6 +16,10 @@ Calibration:
   (with intensity) the pole method and keeps the best; ``result.method`` names it.
 * :func:`calibrate_rig` -- several targets to one reference plus target-to-target edges, made
   consistent by a pose-graph refinement; returns a :class:`RigCalibration`.
+* :func:`check` -- certifies any ``reference_from_target`` (from this library, a file or another
+  tool) against the two clouds: a :class:`CheckReport` with the verdict ``"consistent"``,
+  ``"inconsistent"`` or ``"unverifiable"``, its reason and the evidence. Every calibration passes
+  its result through it and returns only consistent ones (``result.check``).
 * :mod:`lidarcal.metrics` -- :func:`lidarcal.metrics.rqe`, the Renyi quadratic entropy
   crispness for comparing calibrations without ground truth.
 
@@ -37,13 +41,16 @@ The scan simulator lives in :mod:`lidarcal.sim` (``from lidarcal import sim``) a
 line in ``lidarcal simulate``.
 
 Bad input raises ``ValueError`` naming the problem; a calibration that cannot be trusted raises
-:class:`CalibrationError`.
+:class:`CalibrationError` whose ``kind`` says which way it failed: ``"ambiguous"``,
+``"unobservable"``, ``"too_few_features"``, ``"no_agreement"``, ``"out_of_range"``,
+``"time_budget"`` or ``"inconsistent_methods"``.
 """
 
 from lidarcal import metrics, sim  # `from lidarcal import sim` / `metrics`
 from lidarcal._lidarcal import (
     CalibrationError,
     CalibrationResult,
+    CheckReport,
     FileFormatError,
     Line,
     Plane,
@@ -52,6 +59,7 @@ from lidarcal._lidarcal import (
     calibrate_planes,
     calibrate_poles,
     calibrate_targetless,
+    check,
     extract_planes,
     kabsch,
     ransac_line,
@@ -76,6 +84,7 @@ from lidarcal.calibrate import (
 __all__ = [
     "CalibrationError",
     "CalibrationResult",
+    "CheckReport",
     "FileFormatError",
     "Line",
     "Plane",
@@ -88,6 +97,7 @@ __all__ = [
     "calibrate_poles",
     "calibrate_rig",
     "calibrate_targetless",
+    "check",
     "extract_planes",
     "kabsch",
     "metrics",

@@ -15,6 +15,7 @@ use crate::Error;
 
 mod arrays;
 mod calib;
+mod check;
 mod io;
 mod kernels;
 mod ransac;
@@ -104,6 +105,7 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     kernels::register(m)?;
     ransac::register(m)?;
     calib::register(m)?;
+    check::register(m)?;
     sim::register(m)?;
     Ok(())
 }

@@ -1,0 +1,579 @@
+//! Certify a calibration: is `reference_from_target` consistent with what both sensors saw?
+//!
+//! [`check`] is independent of any calibration method: it takes the two clouds and a transform
+//! (from this crate, a file or another tool) and returns a [`CheckReport`] with a
+//! [`Verdict`] and the evidence behind it. Every calibration of this crate passes its final pose
+//! through it and returns only [`Verdict::Consistent`] results.
+//!
+//! # What it measures
+//! Both clouds are reduced to voxel centroids ([`CheckOptions::voxel_size`]).
+//! * **Overlap and agreement.** Target points are mapped into the reference frame; a point is in
+//!   the **overlap** when a reference point lies within [`CheckOptions::overlap_distance`], and it
+//!   **agrees** when its distance to the reference surface there (point-to-plane, the surface
+//!   normal from the reference neighbours) is within `3 sigma` of the measured noise. The same is
+//!   done the other way (reference points onto the target).
+//! * **Free space.** A point of one scan that lands in space the other sensor saw through (in
+//!   front of its nearest return along the same ray, [`crate::visibility`]) is a **violation**.
+//!   The truth leaves only moving objects there; a turned or shifted pose fills it.
+//! * **Local re-alignment.** Point-to-plane ICP ([`crate::icp`]) from the given pose: the
+//!   **correction** it applies is how far the pose is from the nearest pose the scene prefers. A
+//!   1 degree or 10 cm error is corrected back; the truth moves by the scene's own bias only.
+//! * **Observability.** The information matrix of that alignment: its weakest translation and
+//!   rotation directions and their share of the information (a corridor has none along its
+//!   axis), and from its covariance the smallest errors this scene can detect.
+//!
+//! # Verdict
+//! * [`Verdict::Unverifiable`]: too few points in the overlap, or a direction the overlap does
+//!   not constrain (nothing there could reveal an error along it).
+//! * [`Verdict::Inconsistent`]: the correction exceeds the tolerance (the larger of the fixed
+//!   floor and three standard deviations), or too many points violate the free space, or too few
+//!   overlapping points agree.
+//! * [`Verdict::Consistent`]: none of these.
+//!
+//! ```
+//! use lidarcal::check::{check, CheckOptions, Verdict};
+//! use lidarcal::sim::scenes::{street_scene, StreetOptions};
+//! use nalgebra::{Translation3, Isometry3};
+//!
+//! let scene = street_scene(&StreetOptions::default())?;
+//! let (reference, target) = (scene.reference.positions(), scene.target.positions());
+//! let options = CheckOptions::default();
+//! let report = check(&reference, &target, &scene.reference_from_target, &options)?;
+//! assert_eq!(report.verdict, Verdict::Consistent, "{}", report.reason);
+//! // The same pose 30 cm off along y is flagged.
+//! let off = Translation3::new(0.0, 0.3, 0.0) * scene.reference_from_target;
+//! let report = check(&reference, &target, &off, &options)?;
+//! assert_eq!(report.verdict, Verdict::Inconsistent, "{}", report.reason);
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+
+use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
+
+use crate::error::{ensure_points, Error, Result};
+use crate::geometry::rotation_angle;
+use crate::icp::{
+    point_to_plane_icp, voxel_downsample, weakest_direction, IcpOptions, SurfaceCloud,
+};
+use crate::visibility::RangeImage;
+
+/// Fewest points in the overlap for a verdict other than [`Verdict::Unverifiable`].
+const MIN_OVERLAP_POINTS: usize = 100;
+/// Smallest noise scale (metres, 1 sigma) the agreement test uses: below it, voxel centroids and
+/// surface curvature dominate the residuals.
+const MIN_NOISE: f64 = 0.01;
+/// Largest noise scale (metres) the agreement test uses.
+const MAX_NOISE: f64 = 0.1;
+
+/// The outcome of [`check`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Verdict {
+    /// The clouds agree under the transform, and they could have shown an error.
+    Consistent,
+    /// The clouds show that the transform is wrong.
+    Inconsistent,
+    /// The clouds cannot tell: too little overlap, or a direction they do not constrain.
+    Unverifiable,
+}
+
+impl Verdict {
+    /// `"consistent"`, `"inconsistent"` or `"unverifiable"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::Consistent => "consistent",
+            Verdict::Inconsistent => "inconsistent",
+            Verdict::Unverifiable => "unverifiable",
+        }
+    }
+}
+
+impl std::fmt::Display for Verdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Options of [`check`]; the defaults suit spinning LiDARs at street scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckOptions {
+    /// Voxel side of the downsampling (metres).
+    pub voxel_size: f64,
+    /// Points of each cloud used (at most, by a fixed stride over the voxels).
+    pub samples: usize,
+    /// A mapped point is in the overlap when the other cloud has a point within this (metres).
+    pub overlap_distance: f64,
+    /// Range noise of the sensors (metres, 1 sigma), or `None` to measure it from the residuals.
+    pub noise: Option<f64>,
+    /// Fewest overlapping points, as a share of the sampled target points.
+    pub min_overlap: f64,
+    /// Fewest agreeing points, as a share of the overlapping ones (both ways).
+    pub min_agreement: f64,
+    /// Most points in the other sensor's free space, as a share of those it could see (both ways).
+    pub max_violations: f64,
+    /// Smallest rotation correction (radians) that makes the pose inconsistent: the floor of the
+    /// tolerance, for the bias a scene's own structure gives the local alignment.
+    pub rotation_tolerance: f64,
+    /// Smallest translation correction (metres) that makes the pose inconsistent.
+    pub translation_tolerance: f64,
+    /// Smallest share of the translation (and rotation) information in its weakest direction;
+    /// below it the verdict is [`Verdict::Unverifiable`].
+    pub min_information_share: f64,
+    /// Bin size of the range images of the free-space test (radians). A point is tested only
+    /// where the other sensor has a return in its own bin: fine bins keep the test to directions
+    /// a ray really took, so the edge of a box or a ring of grazing ground does not count.
+    pub visibility_resolution: f64,
+}
+
+impl Default for CheckOptions {
+    fn default() -> Self {
+        CheckOptions {
+            voxel_size: 0.1,
+            samples: 4000,
+            overlap_distance: 0.3,
+            noise: None,
+            min_overlap: 0.02,
+            min_agreement: 0.5,
+            max_violations: 0.1,
+            rotation_tolerance: 0.5f64.to_radians(),
+            translation_tolerance: 0.06,
+            min_information_share: 0.005,
+            visibility_resolution: 0.25f64.to_radians(),
+        }
+    }
+}
+
+impl CheckOptions {
+    /// `Err(InvalidInput)` naming the first option out of range.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::InvalidInput(format!(
+                    "{name} must be finite and positive, got {v}"
+                )))
+            }
+        };
+        positive("voxel_size", self.voxel_size)?;
+        positive("overlap_distance", self.overlap_distance)?;
+        positive("rotation_tolerance", self.rotation_tolerance)?;
+        positive("translation_tolerance", self.translation_tolerance)?;
+        if let Some(n) = self.noise {
+            positive("noise", n)?;
+        }
+        for (name, v) in [
+            ("min_overlap", self.min_overlap),
+            ("min_agreement", self.min_agreement),
+            ("max_violations", self.max_violations),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(Error::InvalidInput(format!(
+                    "{name} must be in [0, 1], got {v}"
+                )));
+            }
+        }
+        if !(0.0..1.0 / 3.0).contains(&self.min_information_share) {
+            return Err(Error::InvalidInput(format!(
+                "min_information_share must be in [0, 1/3), got {}",
+                self.min_information_share
+            )));
+        }
+        if self.samples < MIN_OVERLAP_POINTS {
+            return Err(Error::InvalidInput(format!(
+                "samples must be at least {MIN_OVERLAP_POINTS}, got {}",
+                self.samples
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What [`check`] found (see the [module docs](self)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckReport {
+    /// The verdict.
+    pub verdict: Verdict,
+    /// One line saying why.
+    pub reason: String,
+    /// Share of the sampled target points that land within `overlap_distance` of a reference
+    /// point.
+    pub overlap: f64,
+    /// The same for reference points mapped onto the target.
+    pub reverse_overlap: f64,
+    /// Share of the overlapping target points within `3 sigma` of the reference surface.
+    pub agreement: f64,
+    /// The same for reference points on the target surface.
+    pub reverse_agreement: f64,
+    /// Share of target points that land in the reference sensor's free space, of those it could
+    /// have seen.
+    pub violations: f64,
+    /// Share of reference points in the target sensor's free space.
+    pub reverse_violations: f64,
+    /// Root-mean-square point-to-plane residual of the agreeing target points (metres).
+    pub rmse: f64,
+    /// The noise scale used (metres, 1 sigma): given, or measured from the residuals.
+    pub noise: f64,
+    /// Points in the overlap (target side).
+    pub overlap_points: usize,
+    /// The pose a local re-alignment prefers (`reference_from_target`).
+    pub aligned: Isometry3<f64>,
+    /// Rotation between the given pose and `aligned` (radians).
+    pub correction_rotation: f64,
+    /// Translation between the given pose and `aligned` (metres).
+    pub correction_translation: f64,
+    /// The least-constrained translation direction (reference frame) and its share of the
+    /// translation information (`1/3` when isotropic, `0` when unconstrained).
+    pub weakest_translation: (Vector3<f64>, f64),
+    /// The least-constrained rotation axis and its share of the rotation information.
+    pub weakest_rotation: (Vector3<f64>, f64),
+    /// The smallest rotation error (radians) this scene flags: the tolerance it was held to.
+    pub detectable_rotation: f64,
+    /// The smallest translation error (metres) this scene flags.
+    pub detectable_translation: f64,
+    /// Covariance of the aligned pose (tangent `[rho, phi]`), when the information is regular.
+    pub covariance: Option<Matrix6<f64>>,
+}
+
+impl CheckReport {
+    /// `true` for [`Verdict::Consistent`].
+    pub fn is_consistent(&self) -> bool {
+        self.verdict == Verdict::Consistent
+    }
+}
+
+impl std::fmt::Display for CheckReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: {} (overlap {:.0} %, agreement {:.0} % / {:.0} %, free-space violations \
+             {:.1} % / {:.1} %, residual {:.1} cm, correction {:.2} deg / {:.1} cm, detects \
+             {:.2} deg / {:.1} cm)",
+            self.verdict,
+            self.reason,
+            self.overlap * 100.0,
+            self.agreement * 100.0,
+            self.reverse_agreement * 100.0,
+            self.violations * 100.0,
+            self.reverse_violations * 100.0,
+            self.rmse * 100.0,
+            self.correction_rotation.to_degrees(),
+            self.correction_translation * 100.0,
+            self.detectable_rotation.to_degrees(),
+            self.detectable_translation * 100.0,
+        )
+    }
+}
+
+/// One cloud, downsampled and indexed, with its sensor's range image.
+struct Side {
+    surface: SurfaceCloud,
+    samples: Vec<Point3<f64>>,
+    image: RangeImage,
+}
+
+impl Side {
+    fn new(points: &[Point3<f64>], options: &CheckOptions) -> Result<Self> {
+        let (voxels, _) = voxel_downsample(points, options.voxel_size)?;
+        let stride = voxels.len().div_ceil(options.samples).max(1);
+        let samples = voxels.iter().step_by(stride).copied().collect();
+        let image = RangeImage::new(points, options.visibility_resolution)?;
+        Ok(Side {
+            surface: SurfaceCloud::new(voxels)?,
+            samples,
+            image,
+        })
+    }
+}
+
+/// Point-to-plane residuals of `points` mapped by `pose` onto `surface`: `(in overlap, |residual|
+/// of those with a surface normal)`.
+fn residuals(
+    surface: &SurfaceCloud,
+    points: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    overlap_distance: f64,
+) -> (usize, Vec<f64>) {
+    let mut overlap = 0;
+    let mut out = Vec::with_capacity(points.len());
+    for p in points {
+        let q = pose * p;
+        let Some((i, _)) = surface.nearest(&q, overlap_distance) else {
+            continue;
+        };
+        overlap += 1;
+        let (Some(n), Some(s)) = (surface.normal(i), surface.points().get(i)) else {
+            continue;
+        };
+        out.push(n.dot(&(q - s)).abs());
+    }
+    (overlap, out)
+}
+
+/// Share of `points` (their own sensor's frame) that land in `image`'s free space once mapped by
+/// `image_from_points`, of those that land where the image has a return.
+fn violation_share(
+    image: &RangeImage,
+    points: &[Point3<f64>],
+    image_from_points: &Isometry3<f64>,
+) -> f64 {
+    let mut seen = 0usize;
+    let mut bad = 0usize;
+    for p in points {
+        if p.coords.norm() < crate::visibility::MIN_VISIBILITY_RANGE {
+            continue;
+        }
+        match image.violation(&(image_from_points * p)) {
+            Some(true) => {
+                seen += 1;
+                bad += 1;
+            }
+            Some(false) => seen += 1,
+            None => {}
+        }
+    }
+    if seen == 0 {
+        0.0
+    } else {
+        bad as f64 / seen as f64
+    }
+}
+
+/// The median of `values` (0 for none).
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    let (_, m, _) = values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    *m
+}
+
+/// Checks `reference_from_target` against the two clouds (each in its own sensor's frame). See
+/// the [module docs](self).
+///
+/// Errors: [`Error::InvalidInput`] for bad options, non-finite or far-out points, a non-finite
+/// transform, or a cloud with fewer than ten points. An unverifiable or inconsistent pose is not
+/// an error: it is the report's verdict.
+pub fn check(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    reference_from_target: &Isometry3<f64>,
+    options: &CheckOptions,
+) -> Result<CheckReport> {
+    options.validate()?;
+    ensure_points("reference", reference)?;
+    ensure_points("target", target)?;
+    let t = reference_from_target;
+    if !(t.translation.vector.iter().all(|v| v.is_finite())
+        && t.rotation.coords.iter().all(|v| v.is_finite()))
+    {
+        return Err(Error::InvalidInput(
+            "the transform has non-finite entries".into(),
+        ));
+    }
+    let r = Side::new(reference, options)?;
+    let g = Side::new(target, options)?;
+
+    // Agreement both ways at the given pose.
+    let (overlap_t, mut res_t) = residuals(&r.surface, &g.samples, t, options.overlap_distance);
+    let inverse = t.inverse();
+    let (overlap_r, mut res_r) =
+        residuals(&g.surface, &r.samples, &inverse, options.overlap_distance);
+    let (normals_t, normals_r) = (res_t.len(), res_r.len());
+    let noise = options.noise.unwrap_or_else(|| {
+        // The median absolute residual of a Gaussian is 0.674 sigma; the voxel centroids
+        // average the noise, the surface curvature adds to it: both cancel well enough here.
+        (median(&mut res_t.clone()) / 0.674).clamp(MIN_NOISE, MAX_NOISE)
+    });
+    let limit = 3.0 * noise;
+    let agree = |res: &[f64]| {
+        if res.is_empty() {
+            0.0
+        } else {
+            res.iter().filter(|r| **r <= limit).count() as f64 / res.len() as f64
+        }
+    };
+    let agreement = agree(&res_t);
+    let reverse_agreement = agree(&res_r);
+    res_t.retain(|r| *r <= limit);
+    let rmse = if res_t.is_empty() {
+        0.0
+    } else {
+        (res_t.iter().map(|r| r * r).sum::<f64>() / res_t.len() as f64).sqrt()
+    };
+    res_r.clear();
+    let overlap = overlap_t as f64 / g.samples.len().max(1) as f64;
+    let reverse_overlap = overlap_r as f64 / r.samples.len().max(1) as f64;
+
+    // Free space both ways.
+    let violations = violation_share(&r.image, &g.samples, t);
+    let reverse_violations = violation_share(&g.image, &r.samples, &inverse);
+
+    // Local re-alignment and observability.
+    let envf = |k: &str, d: f64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let icp_options = IcpOptions {
+        max_distance: 1.0,
+        // A sparse scene needs the final gate near the noise: at 20 cm, neighbouring scan rings
+        // of a 16-beam unit pull a corner's pose 30 cm along its weakest direction.
+        min_distance: (5.0 * noise).max(options.voxel_size),
+        samples: options.samples,
+        ..IcpOptions::default()
+    };
+    let icp = point_to_plane_icp(&r.surface, &g.samples, t, &icp_options).ok();
+    let (
+        aligned,
+        correction_rotation,
+        correction_translation,
+        weakest_translation,
+        weakest_rotation,
+        covariance,
+    ) = match &icp {
+        Some(icp) => {
+            let delta = icp.pose * inverse;
+            (
+                icp.pose,
+                rotation_angle(&delta.rotation.to_rotation_matrix()),
+                (icp.pose.translation.vector - t.translation.vector).norm(),
+                weakest_direction(&icp.information.fixed_view::<3, 3>(0, 0).into_owned()),
+                weakest_direction(&icp.information.fixed_view::<3, 3>(3, 3).into_owned()),
+                icp.covariance,
+            )
+        }
+        None => (*t, 0.0, 0.0, (Vector3::x(), 0.0), (Vector3::x(), 0.0), None),
+    };
+    // Tolerances: the floors, or three standard deviations of the aligned pose where larger.
+    let (sd_t, sd_r) = covariance
+        .map(|c| {
+            let t3 = c
+                .fixed_view::<3, 3>(0, 0)
+                .symmetric_eigenvalues()
+                .amax()
+                .max(0.0)
+                .sqrt();
+            let r3 = c
+                .fixed_view::<3, 3>(3, 3)
+                .symmetric_eigenvalues()
+                .amax()
+                .max(0.0)
+                .sqrt();
+            (t3, r3)
+        })
+        .unwrap_or((f64::INFINITY, f64::INFINITY));
+    let detectable_rotation = options.rotation_tolerance.max(3.0 * sd_r);
+    let detectable_translation = options.translation_tolerance.max(3.0 * sd_t);
+
+    let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
+    let pct = |v: f64| v * 100.0;
+    let (verdict, reason) = if overlap_t < MIN_OVERLAP_POINTS
+        || normals_t.min(normals_r) < MIN_OVERLAP_POINTS / 2
+        || overlap < options.min_overlap
+    {
+        (
+            Verdict::Unverifiable,
+            format!(
+                "too little overlap: {overlap_t} target points ({:.1} %) land within {:.2} m of \
+                 the reference (need {MIN_OVERLAP_POINTS} and {:.1} %)",
+                pct(overlap),
+                options.overlap_distance,
+                pct(options.min_overlap)
+            ),
+        )
+    } else if violations.max(reverse_violations) > options.max_violations {
+        (
+            Verdict::Inconsistent,
+            format!(
+                "{:.1} % of the target points and {:.1} % of the reference points land in space \
+                 the other sensor saw through (> {:.1} %)",
+                pct(violations),
+                pct(reverse_violations),
+                pct(options.max_violations)
+            ),
+        )
+    } else if agreement.min(reverse_agreement) < options.min_agreement {
+        (
+            Verdict::Inconsistent,
+            format!(
+                "only {:.1} % of the overlapping target points and {:.1} % of the reference points \
+                 lie within {:.1} cm of the other's surface (< {:.0} %)",
+                pct(agreement),
+                pct(reverse_agreement),
+                limit * 100.0,
+                pct(options.min_agreement)
+            ),
+        )
+    } else if icp.is_none() {
+        (
+            Verdict::Unverifiable,
+            "the local re-alignment found too few correspondences".to_string(),
+        )
+    } else if correction_rotation > detectable_rotation
+        || correction_translation > detectable_translation
+    {
+        (
+            Verdict::Inconsistent,
+            format!(
+                "the scene prefers a pose {:.2} deg / {:.1} cm away (tolerance {:.2} deg / {:.1} cm)",
+                correction_rotation.to_degrees(),
+                correction_translation * 100.0,
+                detectable_rotation.to_degrees(),
+                detectable_translation * 100.0
+            ),
+        )
+    } else if weakest_translation.1 < options.min_information_share {
+        (
+            Verdict::Unverifiable,
+            format!(
+                "the overlap does not constrain the translation along {} ({:.2} % of the \
+                 information < {:.2} %): an error along it would go unseen",
+                fmt(&weakest_translation.0),
+                pct(weakest_translation.1),
+                pct(options.min_information_share)
+            ),
+        )
+    } else if weakest_rotation.1 < options.min_information_share {
+        (
+            Verdict::Unverifiable,
+            format!(
+                "the overlap does not constrain the rotation about {} ({:.2} % of the information \
+                 < {:.2} %): an error about it would go unseen",
+                fmt(&weakest_rotation.0),
+                pct(weakest_rotation.1),
+                pct(options.min_information_share)
+            ),
+        )
+    } else {
+        (
+            Verdict::Consistent,
+            format!(
+                "the clouds agree and a local re-alignment moves the pose by {:.2} deg / {:.1} cm",
+                correction_rotation.to_degrees(),
+                correction_translation * 100.0
+            ),
+        )
+    };
+    Ok(CheckReport {
+        verdict,
+        reason,
+        overlap,
+        reverse_overlap,
+        agreement,
+        reverse_agreement,
+        violations,
+        reverse_violations,
+        rmse,
+        noise,
+        overlap_points: overlap_t,
+        aligned,
+        correction_rotation,
+        correction_translation,
+        weakest_translation,
+        weakest_rotation,
+        detectable_rotation,
+        detectable_translation,
+        covariance,
+    })
+}

@@ -1,0 +1,100 @@
+"""lidarcal.scenarios and calibration trust on a sample of its adversarial scenes.
+
+The full count is ``python benches/adversarial.py``; here a few scenes per family must not get a
+wrong answer from any method (a refusal is fine, a wrong transform is not).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import lidarcal
+from lidarcal import scenarios
+
+ROT_TOL = 0.05  # rad
+TRANS_TOL = 0.10  # m
+
+#: Two scenes per family: seed 0 and one more.
+SAMPLE = [(family, seed) for family in scenarios.FAMILIES for seed in (0, 1)]
+
+
+def _errors(truth: np.ndarray, est: np.ndarray) -> tuple[float, float]:
+    r = truth[:3, :3].T @ est[:3, :3]
+    rot = float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+    return rot, float(np.linalg.norm((np.linalg.inv(truth) @ est)[:3, 3]))
+
+
+@pytest.mark.parametrize(("family", "seed"), SAMPLE)
+def test_no_wrong_answer(family: str, seed: int) -> None:
+    scene = scenarios.make(family, seed)
+    wrong = []
+    for method in scene.methods:
+        try:
+            result = lidarcal.calibrate(scene.reference, scene.target, method=method)
+        except (lidarcal.CalibrationError, ValueError):
+            continue  # refusing is allowed
+        rot, trans = _errors(scene.reference_from_target, np.asarray(result.transform))
+        if not (rot <= ROT_TOL and trans <= TRANS_TOL):
+            wrong.append(
+                f"{method} (by {result.method}): {np.degrees(rot):.2f} deg, {100 * trans:.1f} cm"
+            )
+    assert not wrong, (
+        f"scenarios.make({family!r}, {seed}) got wrong answers: {'; '.join(wrong)}\n"
+        f"{scene.description}"
+    )
+
+
+def test_make_is_deterministic() -> None:
+    for family in scenarios.FAMILIES:
+        a, b = scenarios.make(family, 3), scenarios.make(family, 3)
+        assert np.array_equal(a.reference, b.reference)
+        assert np.array_equal(a.target, b.target)
+        assert np.array_equal(a.reference_from_target, b.reference_from_target)
+        assert (a.solvable, a.description, a.methods) == (b.solvable, b.description, b.methods)
+        assert not np.array_equal(a.target, scenarios.make(family, 4).target)
+
+
+def test_unknown_family_and_bad_seed_raise() -> None:
+    with pytest.raises(ValueError, match="unknown family"):
+        scenarios.make("volcano", 0)
+    with pytest.raises(ValueError):
+        scenarios.make("corner", -1)
+
+
+@pytest.mark.parametrize("family", scenarios.FAMILIES)
+def test_scenario_shapes_and_truth(family: str) -> None:
+    scene = scenarios.make(family, 5)
+    assert scene.family == family and scene.seed == 5
+    for cloud in (scene.reference, scene.target):
+        assert cloud.ndim == 2 and cloud.shape[1] == 4 and cloud.dtype == np.float64
+        assert cloud.shape[0] > 1000
+        assert np.all(np.isfinite(cloud))
+        assert np.all((cloud[:, 3] >= 0) & (cloud[:, 3] <= 255)) and np.ptp(cloud[:, 3]) > 0
+    t = scene.reference_from_target
+    assert t.shape == (4, 4)
+    assert np.allclose(t[3], [0, 0, 0, 1])
+    assert np.allclose(t[:3, :3].T @ t[:3, :3], np.eye(3), atol=1e-9)
+    assert np.isclose(np.linalg.det(t[:3, :3]), 1.0)
+    assert scene.solvable in (True, False, None)
+    assert "auto" in scene.methods and "targetless" in scene.methods
+    assert set(scene.methods) <= {"auto", "planes", "targetless", "poles"}
+    assert scene.description.startswith(f"{family} 5:")
+    # The truth maps the target scan onto the reference scan, a shifted one less well.
+    tree = cKDTree(scene.reference[:, :3])
+
+    def overlap(pose: np.ndarray) -> float:
+        mapped = scene.target[:, :3] @ pose[:3, :3].T + pose[:3, 3]
+        return float(np.mean(tree.query(mapped, distance_upper_bound=0.25)[0] < 0.25))
+
+    off = t.copy()
+    off[:3, 3] += 0.5  # half a metre along each axis: off the ground, off the walls
+    assert overlap(t) > 0.05 and overlap(t) > overlap(off)
+
+
+def test_families_list_methods_they_can_use() -> None:
+    assert scenarios.FAMILIES == ("corner", "poles", "partial", "corridor", "repeated")
+    assert "planes" in scenarios.make("corner", 0).methods
+    assert "poles" in scenarios.make("poles", 0).methods
+    assert scenarios.make("partial", 0).solvable is None
