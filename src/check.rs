@@ -409,12 +409,6 @@ pub fn check(
     let reverse_violations = violation_share(&g.image, &r.samples, &inverse);
 
     // Local re-alignment and observability.
-    let envf = |k: &str, d: f64| {
-        std::env::var(k)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(d)
-    };
     let icp_options = IcpOptions {
         max_distance: 1.0,
         // A sparse scene needs the final gate near the noise: at 20 cm, neighbouring scan rings
