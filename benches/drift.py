@@ -42,7 +42,9 @@ def pairs(eval_data: Path) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray
     p64 = np.load(h / "p64.npy")[:, :3].astype(np.float64)
     for qt in ("qt_201", "qt_202", "qt_203", "qt_204"):
         truth = np.array(refs["hesai_scene1"][f"{qt}_to_p64"]["matrix_4x4"])
-        out.append((f"hesai {qt}->p64", p64, np.load(h / f"{qt}.npy")[:, :3].astype(np.float64), truth))
+        out.append(
+            (f"hesai {qt}->p64", p64, np.load(h / f"{qt}.npy")[:, :3].astype(np.float64), truth)
+        )
     g = eval_data / "small_gicp"
     source = np.load(g / "source.npy")[:, :3].astype(np.float64)
     target = np.load(g / "target.npy")[:, :3].astype(np.float64)
@@ -76,7 +78,9 @@ def main() -> None:
     sizes = [("rot", r, 0.0) for r in ROTATIONS_DEG] + [("trans", 0.0, t) for t in TRANSLATIONS_M]
     flagged: dict[tuple[str, float, float], list[bool]] = {s: [] for s in sizes}
     times: list[float] = []
-    print("| pair | verdict on the reference | correction (deg / cm) | detects (deg / cm) | 1 deg flagged | 10 cm flagged |")
+    print(
+        "| pair | verdict on the reference | correction (deg / cm) | detects (deg / cm) | 1 deg flagged | 10 cm flagged |"
+    )
     print("|---|---|---|---|---|---|")
     false_alarms = 0
     all_pairs = pairs(args.eval_data)
@@ -100,7 +104,8 @@ def main() -> None:
             f"| {name} | {report.verdict} | {report.correction_rotation_deg:.3f} / "
             f"{report.correction_translation_m * 100:.1f} | {report.detectable_rotation_deg:.2f} / "
             f"{report.detectable_translation_m * 100:.1f} | "
-            f"{np.mean(row[('rot', 1.0, 0.0)]) * 100:.0f} % | {np.mean(row[('trans', 0.0, 0.1)]) * 100:.0f} % |"
+            f"{np.mean(row[('rot', 1.0, 0.0)]) * 100:.0f} % | "
+            f"{np.mean(row[('trans', 0.0, 0.1)]) * 100:.0f} % |"
         )
         if report.verdict != "consistent":
             print(f"|   reason | {report.reason} | | | | |")

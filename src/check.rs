@@ -49,7 +49,7 @@
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
-use crate::error::{ensure_points, Error, Result};
+use crate::error::{ensure_points, Error, FailureKind, Result};
 use crate::geometry::rotation_angle;
 use crate::icp::{
     point_to_plane_icp, voxel_downsample, weakest_direction, IcpOptions, SurfaceCloud,
@@ -132,9 +132,9 @@ impl Default for CheckOptions {
             noise: None,
             min_overlap: 0.02,
             min_agreement: 0.5,
-            max_violations: 0.1,
+            max_violations: 0.25,
             rotation_tolerance: 0.5f64.to_radians(),
-            translation_tolerance: 0.06,
+            translation_tolerance: 0.08,
             min_information_share: 0.005,
             visibility_resolution: 0.25f64.to_radians(),
         }
@@ -142,6 +142,22 @@ impl Default for CheckOptions {
 }
 
 impl CheckOptions {
+    /// The options a method whose own geometry fixes the pose (three independent planes, two
+    /// non-parallel poles) certifies with: the agreement and free-space tests as by default, a
+    /// local re-alignment that flags only corrections beyond 3 degrees / 50 cm (a gross error),
+    /// and no observability floor. On sparse scenes (a 16-beam corner, poles on open ground)
+    /// point-to-plane ICP drifts along the directions few points constrain: it moved simulated
+    /// corner and pole results that were within 0.1 degrees / 1 cm of the truth by up to
+    /// 1.4 degrees / 24 cm, so the default tolerance there would refuse correct results.
+    pub fn gross() -> Self {
+        CheckOptions {
+            min_information_share: 0.0,
+            rotation_tolerance: 3f64.to_radians(),
+            translation_tolerance: 0.5,
+            ..CheckOptions::default()
+        }
+    }
+
     /// `Err(InvalidInput)` naming the first option out of range.
     pub fn validate(&self) -> Result<()> {
         let positive = |name: &str, v: f64| {
@@ -231,6 +247,11 @@ pub struct CheckReport {
     pub detectable_translation: f64,
     /// Covariance of the aligned pose (tangent `[rho, phi]`), when the information is regular.
     pub covariance: Option<Matrix6<f64>>,
+    /// For a verdict other than consistent, the failure kind a calibration refusing this pose
+    /// reports: [`FailureKind::NoAgreement`] when inconsistent,
+    /// [`FailureKind::TooFewFeatures`] for too little overlap, [`FailureKind::Unobservable`] for
+    /// an unconstrained direction.
+    pub failure: Option<FailureKind>,
 }
 
 impl CheckReport {
@@ -462,12 +483,13 @@ pub fn check(
 
     let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
     let pct = |v: f64| v * 100.0;
-    let (verdict, reason) = if overlap_t < MIN_OVERLAP_POINTS
+    let (verdict, failure, reason) = if overlap_t < MIN_OVERLAP_POINTS
         || normals_t.min(normals_r) < MIN_OVERLAP_POINTS / 2
         || overlap < options.min_overlap
     {
         (
             Verdict::Unverifiable,
+            Some(FailureKind::TooFewFeatures),
             format!(
                 "too little overlap: {overlap_t} target points ({:.1} %) land within {:.2} m of \
                  the reference (need {MIN_OVERLAP_POINTS} and {:.1} %)",
@@ -479,6 +501,7 @@ pub fn check(
     } else if violations.max(reverse_violations) > options.max_violations {
         (
             Verdict::Inconsistent,
+            Some(FailureKind::NoAgreement),
             format!(
                 "{:.1} % of the target points and {:.1} % of the reference points land in space \
                  the other sensor saw through (> {:.1} %)",
@@ -490,6 +513,7 @@ pub fn check(
     } else if agreement.min(reverse_agreement) < options.min_agreement {
         (
             Verdict::Inconsistent,
+            Some(FailureKind::NoAgreement),
             format!(
                 "only {:.1} % of the overlapping target points and {:.1} % of the reference points \
                  lie within {:.1} cm of the other's surface (< {:.0} %)",
@@ -502,6 +526,7 @@ pub fn check(
     } else if icp.is_none() {
         (
             Verdict::Unverifiable,
+            Some(FailureKind::TooFewFeatures),
             "the local re-alignment found too few correspondences".to_string(),
         )
     } else if correction_rotation > detectable_rotation
@@ -509,6 +534,7 @@ pub fn check(
     {
         (
             Verdict::Inconsistent,
+            Some(FailureKind::NoAgreement),
             format!(
                 "the scene prefers a pose {:.2} deg / {:.1} cm away (tolerance {:.2} deg / {:.1} cm)",
                 correction_rotation.to_degrees(),
@@ -520,6 +546,7 @@ pub fn check(
     } else if weakest_translation.1 < options.min_information_share {
         (
             Verdict::Unverifiable,
+            Some(FailureKind::Unobservable),
             format!(
                 "the overlap does not constrain the translation along {} ({:.2} % of the \
                  information < {:.2} %): an error along it would go unseen",
@@ -531,6 +558,7 @@ pub fn check(
     } else if weakest_rotation.1 < options.min_information_share {
         (
             Verdict::Unverifiable,
+            Some(FailureKind::Unobservable),
             format!(
                 "the overlap does not constrain the rotation about {} ({:.2} % of the information \
                  < {:.2} %): an error about it would go unseen",
@@ -542,6 +570,7 @@ pub fn check(
     } else {
         (
             Verdict::Consistent,
+            None,
             format!(
                 "the clouds agree and a local re-alignment moves the pose by {:.2} deg / {:.1} cm",
                 correction_rotation.to_degrees(),
@@ -569,5 +598,28 @@ pub fn check(
         detectable_rotation,
         detectable_translation,
         covariance,
+        failure,
     })
+}
+
+/// [`check`] as a gate: `Ok(report)` when the verdict is consistent, otherwise
+/// `Err(Calibration)` of the report's failure kind naming the reason. Every calibration method
+/// passes its final pose through it.
+pub fn certify(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    reference_from_target: &Isometry3<f64>,
+    options: &CheckOptions,
+) -> Result<CheckReport> {
+    let report = check(reference, target, reference_from_target, options)?;
+    match report.failure {
+        None => Ok(report),
+        Some(kind) => Err(Error::calibration(
+            kind,
+            format!(
+                "the result did not pass the check ({}): {}",
+                report.verdict, report.reason
+            ),
+        )),
+    }
 }

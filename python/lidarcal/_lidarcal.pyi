@@ -18,7 +18,82 @@ __version__: str
 INTENSITY_NAMES: tuple[str, ...]
 
 class CalibrationError(RuntimeError):
-    """A calibration could not produce a trustworthy result; the message says why."""
+    """A calibration could not produce a trustworthy result; the message says why.
+
+    ``kind`` is one of "ambiguous", "unobservable", "too_few_features", "no_agreement",
+    "out_of_range", "time_budget" or "inconsistent_methods" (raised by the library; absent on an
+    instance made by hand).
+    """
+
+    kind: FailureKind
+
+FailureKind = Literal[
+    "ambiguous",
+    "unobservable",
+    "too_few_features",
+    "no_agreement",
+    "out_of_range",
+    "time_budget",
+    "inconsistent_methods",
+]
+
+class CheckReport:
+    """What ``check`` found: a verdict, its one-line reason and the evidence."""
+
+    @property
+    def verdict(self) -> Literal["consistent", "inconsistent", "unverifiable"]: ...
+    @property
+    def reason(self) -> str: ...
+    @property
+    def overlap(self) -> float: ...
+    @property
+    def reverse_overlap(self) -> float: ...
+    @property
+    def agreement(self) -> float: ...
+    @property
+    def reverse_agreement(self) -> float: ...
+    @property
+    def violations(self) -> float: ...
+    @property
+    def reverse_violations(self) -> float: ...
+    @property
+    def rmse(self) -> float: ...
+    @property
+    def noise(self) -> float: ...
+    @property
+    def overlap_points(self) -> int: ...
+    @property
+    def aligned(self) -> F64Array: ...
+    @property
+    def correction_rotation_deg(self) -> float: ...
+    @property
+    def correction_translation_m(self) -> float: ...
+    @property
+    def weakest_translation(self) -> F64Array: ...
+    @property
+    def weakest_translation_share(self) -> float: ...
+    @property
+    def weakest_rotation(self) -> F64Array: ...
+    @property
+    def weakest_rotation_share(self) -> float: ...
+    @property
+    def detectable_rotation_deg(self) -> float: ...
+    @property
+    def detectable_translation_m(self) -> float: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def __bool__(self) -> bool: ...
+
+def check(
+    reference: npt.ArrayLike,
+    target: npt.ArrayLike,
+    transform: npt.ArrayLike,
+    *,
+    noise: float | None = None,
+    voxel_size: float | None = None,
+    samples: int | None = None,
+    rotation_tolerance_deg: float | None = None,
+    translation_tolerance_m: float | None = None,
+) -> CheckReport: ...
 
 class FileFormatError(ValueError):
     """A file is not a valid point cloud of its format; the message names the file and why."""
@@ -85,6 +160,8 @@ class CalibrationResult:
 
     @property
     def method(self) -> Literal["planes", "poles", "targetless"]: ...
+    @property
+    def check(self) -> CheckReport: ...
     @property
     def transform(self) -> F64Array:
         """(4, 4) ``reference_from_target``."""

@@ -41,6 +41,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
+use crate::check::{certify, CheckOptions, CheckReport};
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::se3_log;
@@ -98,6 +99,8 @@ pub struct PlanarOptions {
     /// Wall-clock budget: past it the calibration stops with [`Error::Calibration`] (see
     /// [`crate::budget`]); `None` for no limit.
     pub time_budget: Option<std::time::Duration>,
+    /// The final check every result must pass ([`crate::check`]).
+    pub check: CheckOptions,
 }
 
 impl Default for PlanarOptions {
@@ -114,6 +117,7 @@ impl Default for PlanarOptions {
                 ..LmOptions::default()
             },
             time_budget: None,
+            check: CheckOptions::gross(),
         }
     }
 }
@@ -136,6 +140,8 @@ pub struct Ordering {
 /// Result of [`calibrate_planes`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlanarCalibration {
+    /// The final check's report (its verdict is always consistent: other poses are refused).
+    pub check: CheckReport,
     /// The calibrated `reference_from_target`.
     pub reference_from_target: Isometry3<f64>,
     /// The closed-form estimate (Kabsch + corner translation) before refinement.
@@ -619,8 +625,11 @@ pub fn calibrate_planes(
     }
     let covariance = report.as_ref().and_then(|r| r.covariance());
     clock.lap("check");
+    let check = certify(reference, target, &pose, &options.check)?;
+    clock.lap("certify");
 
     Ok(PlanarCalibration {
+        check,
         reference_from_target: pose,
         initial_reference_from_target: initial,
         planes_reference: planes_ref,

@@ -92,6 +92,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
+use crate::check::{certify, CheckOptions, CheckReport};
 use crate::cluster::{euclidean_clusters_until, Grid};
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::cylinder::fit_cylinder;
@@ -145,6 +146,12 @@ pub const SPLIT_MIN_LENGTH: f64 = 1.0;
 pub const SPLIT_MIN_ELONGATION: f64 = 3.0;
 /// Largest accepted estimated radius (metres).
 pub const MAX_RADIUS: f64 = 1.0;
+/// Largest RMS distance (metres) of a matched pole's points from its axis model at the result;
+/// correct results stay under 1 cm, a pose from mismatched poles lands decimetres off.
+pub const MAX_POLE_RMSE: f64 = 0.05;
+/// What [`MAX_POLE_RMSE`] allows in addition for [`AxisFit::Line`], whose residuals include the
+/// pole's thickness (metres).
+pub const LINE_FIT_THICKNESS: f64 = 0.2;
 /// A further pole matches a mapped pole when their directions are within this angle (radians,
 /// 5 degrees) ...
 pub const MATCH_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
@@ -232,6 +239,8 @@ pub struct PoleOptions {
     /// Wall-clock budget: past it the calibration stops with [`Error::Calibration`] (see
     /// [`crate::budget`]); `None` for no limit.
     pub time_budget: Option<std::time::Duration>,
+    /// The final check every result must pass ([`crate::check`]).
+    pub check: CheckOptions,
     /// Largest share of a cloud's returns that may be at or above the intensity threshold.
     /// Tape is a small part of any scene (1-2 % in the simulated ones); a threshold that makes
     /// most returns "tape" (e.g. 0) leaves walls and ground to be fitted as poles, and gave poses
@@ -265,6 +274,7 @@ impl Default for PoleOptions {
                 ..LmOptions::default()
             },
             time_budget: None,
+            check: CheckOptions::gross(),
             max_bright_fraction: MAX_BRIGHT_FRACTION,
         }
     }
@@ -330,6 +340,8 @@ pub struct Hypothesis {
 /// Result of [`calibrate_poles`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoleCalibration {
+    /// The final check's report (its verdict is always consistent: other poses are refused).
+    pub check: CheckReport,
     /// The calibrated `reference_from_target`.
     pub reference_from_target: Isometry3<f64>,
     /// The closed-form estimate of the chosen hypothesis before refinement.
@@ -1091,12 +1103,43 @@ pub fn calibrate_poles(
         indices_target.push(pt.indices.clone());
     }
     let pole_rmse = per_pole_rms(&clouds, &best.matches, options.loss, &pose)?;
+    // A centroid line sits up to a radius in front of the axis and estimates no radius: its
+    // residuals include the pole's thickness, allowed up to LINE_FIT_THICKNESS.
+    let allowed = |_: usize| match options.axis_fit {
+        AxisFit::Cylinder => MAX_POLE_RMSE,
+        AxisFit::Line => MAX_POLE_RMSE + LINE_FIT_THICKNESS,
+    };
+    if let Some((k, worst)) = pole_rmse
+        .iter()
+        .copied()
+        .enumerate()
+        .find(|&(k, r)| !(r.is_finite() && r <= allowed(k)))
+    {
+        return Err(Error::calibration(
+            FailureKind::OutOfRange,
+            format!(
+                "pole {k} lies {worst:.3} m (RMS) from its matched axis at the best pose (> \
+                 {:.3} m; correct matches stay under 1 cm): the poles found in the two \
+                 clouds are not the same poles, or one is barely seen",
+                allowed(k)
+            ),
+        ));
+    }
+    if let Some(r) = radii.iter().find(|r| !(r.is_finite() && **r <= MAX_RADIUS)) {
+        return Err(Error::calibration(
+            FailureKind::OutOfRange,
+            format!("a matched pole has a radius of {r:.2} m (> {MAX_RADIUS} m): not a pole"),
+        ));
+    }
     let report = reports[chosen];
     let covariance = report.as_ref().and_then(|r| r.covariance());
     let rmse = best.axis_rms;
     let initial = starts[chosen];
     clock.lap("choose");
+    let check = certify(reference, target, &pose, &options.check)?;
+    clock.lap("certify");
     Ok(PoleCalibration {
+        check,
         reference_from_target: pose,
         initial_reference_from_target: initial,
         poles_reference,

@@ -35,7 +35,9 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Point3, Vector6};
 
 use crate::calib::planes::{calibrate_planes, PlanarCalibration, PlanarOptions};
 use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
+use crate::calib::targetless::pose_error;
 use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
+use crate::check::{check, CheckOptions, CheckReport};
 use crate::geometry::{se3_exp, se3_log};
 use crate::icp::SurfaceCloud;
 use crate::{Error, FailureKind, Result};
@@ -44,10 +46,14 @@ use crate::{Error, FailureKind, Result};
 /// for [`Method::Auto`] and for the overlap test of a target pair in [`calibrate_rig`].
 pub const AGREEMENT_DISTANCE: f64 = 0.25;
 
-/// [`Method::Auto`] prefers the earlier method (corner, targetless, poles) when its agreement is
-/// within this fraction of the best: a 25 cm agreement cannot tell a corner calibration from a
-/// whole-scene one 0.2 degrees away.
+/// [`Method::Auto`] prefers the earlier method (corner, targetless, poles) when its certificate
+/// score is within this of the best.
 pub const AUTO_TIE: f64 = 0.01;
+
+/// When two methods pass the check but disagree beyond their tolerance, [`Method::Auto`] keeps
+/// the better one only when its certificate score (agreement less violations, both ways) is ahead
+/// by at least this; otherwise it refuses with [`FailureKind::InconsistentMethods`].
+pub const AUTO_MARGIN: f64 = 0.1;
 
 /// A target pair becomes an edge of the rig only when its result brings at least this fraction of
 /// the points of one onto the other (the units overlap).
@@ -149,6 +155,17 @@ pub enum Calibration {
 }
 
 impl Calibration {
+    /// The final check's report (consistent for every returned result).
+    pub fn check(&self) -> &CheckReport {
+        match self {
+            Calibration::Planes(c) => &c.check,
+            Calibration::Targetless(c) => &c.check,
+            Calibration::Poles(c) => &c.check,
+        }
+    }
+}
+
+impl Calibration {
     /// The method that produced it (never [`Method::Auto`]).
     pub fn method(&self) -> Method {
         match self {
@@ -190,6 +207,8 @@ pub struct MethodOptions {
     pub agreement_distance: f64,
     /// See [`AUTO_TIE`].
     pub auto_tie: f64,
+    /// See [`AUTO_MARGIN`].
+    pub auto_margin: f64,
 }
 
 impl Default for MethodOptions {
@@ -200,6 +219,7 @@ impl Default for MethodOptions {
             poles: PoleOptions::default(),
             agreement_distance: AGREEMENT_DISTANCE,
             auto_tie: AUTO_TIE,
+            auto_margin: AUTO_MARGIN,
         }
     }
 }
@@ -256,6 +276,12 @@ pub fn calibrate(
             options.agreement_distance
         )));
     }
+    if !(options.auto_margin.is_finite() && options.auto_margin >= 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "auto_margin must be finite and non-negative, got {}",
+            options.auto_margin
+        )));
+    }
     if !(options.auto_tie.is_finite() && options.auto_tie >= 0.0) {
         return Err(Error::InvalidInput(format!(
             "auto_tie must be finite and non-negative, got {}",
@@ -287,23 +313,73 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     if results.len() == 1 {
         return Ok(results.remove(0));
     }
-    let surface = SurfaceCloud::new(reference.points.to_vec())?;
-    let scores: Vec<f64> = results
+    // Every result passed its method's check. Rank them by the certificate, with one noise scale
+    // for all (each check measured its own, and a worse pose measures a larger one).
+    let noise = results
+        .iter()
+        .map(|c| c.check().noise)
+        .fold(f64::INFINITY, f64::min);
+    let check_options = CheckOptions {
+        noise: Some(noise),
+        ..options.targetless.check
+    };
+    let reports = results
         .iter()
         .map(|c| {
-            surface.overlap(
+            check(
+                reference.points,
                 target.points,
                 c.reference_from_target(),
-                options.agreement_distance,
+                &check_options,
             )
         })
-        .collect();
+        .collect::<Result<Vec<_>>>()?;
+    let scores: Vec<f64> = reports.iter().map(certificate_score).collect();
     let best = scores.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let pick = scores
         .iter()
         .position(|s| *s >= best - options.auto_tie)
         .unwrap_or(0);
+    for (i, other) in results.iter().enumerate() {
+        let (chosen, rival) = (&reports[pick], &reports[i]);
+        let (angle, distance) = pose_error(
+            results[pick].reference_from_target(),
+            other.reference_from_target(),
+        );
+        let rotation_tolerance = chosen.detectable_rotation.max(rival.detectable_rotation);
+        let translation_tolerance = chosen
+            .detectable_translation
+            .max(rival.detectable_translation);
+        let disagree = angle > rotation_tolerance || distance > translation_tolerance;
+        if disagree && scores[pick] - scores[i] < options.auto_margin {
+            return Err(Error::calibration(
+                FailureKind::InconsistentMethods,
+                format!(
+                    "the {} and {} methods both passed the check but disagree by {:.2} deg / \
+                     {:.1} cm (beyond their tolerance of {:.2} deg / {:.1} cm), and their \
+                     certificates do not separate them (scores {:.3} and {:.3}, need a margin of \
+                     {}): the scene fits two poses; calibrate with one method, or add structure",
+                    results[pick].method().name(),
+                    other.method().name(),
+                    angle.to_degrees(),
+                    distance * 100.0,
+                    rotation_tolerance.to_degrees(),
+                    translation_tolerance * 100.0,
+                    scores[pick],
+                    scores[i],
+                    options.auto_margin
+                ),
+            ));
+        }
+    }
     Ok(results.swap_remove(pick))
+}
+
+/// How well a certified pose fits: the smaller of the two agreements (points within `3 sigma` of
+/// the other cloud's surface) less the larger free-space violation share.
+fn certificate_score(report: &CheckReport) -> f64 {
+    report.agreement.min(report.reverse_agreement)
+        - report.violations.max(report.reverse_violations)
 }
 
 /// The error when every method of [`Method::Auto`] refused: the kind of the method that got

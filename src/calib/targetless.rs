@@ -85,6 +85,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 
 use super::planes::estimate_threshold;
 use super::{Stopwatch, Timings};
+use crate::check::{certify, CheckOptions, CheckReport};
 use crate::error::{ensure_finite, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::{rotation_angle, Plane};
@@ -123,6 +124,11 @@ pub const VERIFY_REFERENCE_SAMPLES: usize = 2000;
 /// VIOLATION_WEIGHT (v_target + v_reference)`, each `v` the share of a cloud's checked points that
 /// fall into space the other sensor saw through ([`crate::visibility`]).
 pub const VIOLATION_WEIGHT: f64 = 3.0;
+/// Bin size of the verification's range images (radians, 0.5 degrees): a point is tested only
+/// where the other scan has a return in its own bin, and finer bins than the 1 degree default
+/// keep box edges and grazing ground out of the count (they penalised the truth of two
+/// identical boxes more than their 180-degree turn).
+const VISIBILITY_RESOLUTION: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// Yaw step of the ground sweep (radians, 15 degrees): the hypotheses that level the largest
 /// plane of each cloud onto the other's and turn about its normal.
 pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
@@ -218,6 +224,8 @@ pub struct TargetlessOptions {
     pub refuse_ambiguous: bool,
     /// Seed of the RANSAC sampler.
     pub seed: u64,
+    /// The final check every result must pass ([`crate::check`]).
+    pub check: CheckOptions,
 }
 
 impl Default for TargetlessOptions {
@@ -237,6 +245,7 @@ impl Default for TargetlessOptions {
             ground_sweep: true,
             refuse_ambiguous: true,
             seed: 0,
+            check: CheckOptions::default(),
         }
     }
 }
@@ -297,6 +306,8 @@ pub struct PlaneFeature {
 /// Result of [`calibrate_targetless`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct TargetlessCalibration {
+    /// The final check's report (its verdict is always consistent: other poses are refused).
+    pub check: CheckReport,
     /// The calibrated `reference_from_target`.
     pub reference_from_target: Isometry3<f64>,
     /// The winning hypothesis (planes only, before any refinement).
@@ -1153,8 +1164,8 @@ pub fn calibrate_targetless(
     clock.lap("hypotheses");
 
     let surface = SurfaceCloud::new(reference_ds.points.clone())?;
-    let reference_image = RangeImage::new(&reference_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
-    let target_image = RangeImage::new(&target_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
+    let reference_image = RangeImage::new(&reference_ds.points, VISIBILITY_RESOLUTION)?;
+    let target_image = RangeImage::new(&target_ds.points, VISIBILITY_RESOLUTION)?;
     clock.lap("normals");
 
     // Verification in two stages: a quick ICP and score for every hypothesis (screening), then
@@ -1458,6 +1469,16 @@ pub fn calibrate_targetless(
     if let Some(message) = ambiguity {
         return Err(Error::calibration(FailureKind::Ambiguous, message));
     }
+    if let Some(r) = icp.as_ref().filter(|r| !r.converged) {
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            format!(
+                "the final ICP did not converge in {} iterations (its last step stayed above the \
+                 tolerance): the pose is not settled",
+                r.iterations
+            ),
+        ));
+    }
 
     // Matched planes, their input indices and residuals at the result.
     let expand = |prepared: &Prepared, f: &PlaneFeature| -> Vec<usize> {
@@ -1490,7 +1511,9 @@ pub fn calibrate_targetless(
         (None, Some(rep)) => rep.covariance(),
         _ => None,
     };
+    let check = certify(reference, target, &pose, &options.check)?;
     let result = TargetlessCalibration {
+        check,
         reference_from_target: pose,
         initial_reference_from_target: winner.pose,
         planes_reference: matches.iter().map(|&(i, _)| ref_f[i].plane).collect(),

@@ -128,6 +128,13 @@ impl CalibrationResult {
     fn method(&self) -> &'static str {
         self.inner.method().name()
     }
+    /// The final check's report (a CheckReport; always "consistent" for a returned result).
+    #[getter]
+    fn check(&self) -> super::check::CheckReport {
+        super::check::CheckReport {
+            inner: self.inner.check().clone(),
+        }
+    }
     /// (4, 4) reference_from_target: p_ref = R @ p_tgt + t.
     #[getter]
     fn transform<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -603,6 +610,7 @@ fn calibrate_planes(
             ..PlanarOptions::default().lm
         },
         time_budget,
+        check: crate::check::CheckOptions::gross(),
     };
     let inner = run(py, move || {
         rs_calibrate_planes(&reference, &target, &options)

@@ -16,8 +16,31 @@ from lidarcal import scenarios
 ROT_TOL = 0.05  # rad
 TRANS_TOL = 0.10  # m
 
-#: Two scenes per family: seed 0 and one more.
-SAMPLE = [(family, seed) for family in scenarios.FAMILIES for seed in (0, 1)]
+#: Two scenes per family, picked among those the first benchmark run (lidarcal 0.1.0) got wrong,
+#: one per failure it showed: corner 59 a kerb-high pavement taken for the ground by one sensor
+#: (planes), corner 87 a plain corner turned 180 deg (targetless); poles 1 a bright untaped
+#: facade taken for tape, poles 9 the translation along two nearly parallel poles; partial 4 a
+#: slide along the street, partial 66 a street "corner" 90 deg off (auto keeping planes); corridor
+#: 86 a room with a door turned 180 deg, corridor 29 a furnished room 0.5 m off; repeated 29
+#: identical boxes turned 180 deg, repeated 182 a colonnade shifted by one column.
+#: Still wrong after the certification work (issue 15 open): a room turned 180 deg, a furnished
+#: room 0.5 m off and a colonnade shifted by one column all pass the local check, which cannot see
+#: a repeated structure's other copies. Strict: the test fails once they are fixed, so the mark
+#: must then go.
+KNOWN = "known wrong answer (issue 15): repeated structure passes the local check"
+
+SAMPLE = [
+    ("corner", 59),
+    ("corner", 87),
+    ("poles", 1),
+    ("poles", 9),
+    ("partial", 4),
+    ("partial", 66),
+    pytest.param("corridor", 86, marks=pytest.mark.xfail(strict=True, reason=KNOWN)),
+    pytest.param("corridor", 29, marks=pytest.mark.xfail(strict=True, reason=KNOWN)),
+    ("repeated", 29),
+    pytest.param("repeated", 182, marks=pytest.mark.xfail(strict=True, reason=KNOWN)),
+]
 
 
 def _errors(truth: np.ndarray, est: np.ndarray) -> tuple[float, float]:

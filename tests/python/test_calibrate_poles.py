@@ -77,11 +77,16 @@ def test_result_attributes_and_hypotheses() -> None:
 def test_cylinder_beats_line_and_rqe() -> None:
     scene = sim.poles_scene(seed=14, radius=0.15)
     cyl = lidarcal.calibrate_poles(scene.reference, scene.target, vendor="velodyne")
-    line = lidarcal.calibrate_poles(
-        scene.reference, scene.target, vendor="velodyne", axis_fit="line"
-    )
     t_cyl = errors(scene.reference_from_target, cyl.transform)[1]
-    t_line = errors(scene.reference_from_target, line.transform)[1]
+    try:
+        line = lidarcal.calibrate_poles(
+            scene.reference, scene.target, vendor="velodyne", axis_fit="line"
+        )
+        t_line = errors(scene.reference_from_target, line.transform)[1]
+    except lidarcal.CalibrationError as e:
+        # The centroid line's pose can fail the final check: then it is worse by refusal.
+        assert e.kind == "no_agreement", e
+        t_line = float("inf")
     assert t_cyl < t_line, (t_cyl, t_line)
     # RQE: the merged cloud is crisper with the calibration than with a wrong one.
     tgt = scene.target[:, :3]
