@@ -75,12 +75,15 @@ def calibrate(
 
     ``"planes"`` is :func:`lidarcal.calibrate_planes` (a wall corner), ``"targetless"``
     :func:`lidarcal.calibrate_targetless` (the planes of any scene, e.g. a street), ``"poles"``
-    :func:`lidarcal.calibrate_poles` (needs ``(N, 4)`` clouds with intensity). ``"auto"`` runs
-    every applicable method and returns the result with the largest fraction of target points
-    within 25 cm of a reference point; results within 0.01 of the best count as a tie, which the
-    earlier method in that order wins. The result's ``method`` names it. Raises
-    :class:`CalibrationError` listing each method's reason when none succeeds, ``ValueError`` for
-    malformed input or an unknown method.
+    :func:`lidarcal.calibrate_poles` (needs ``(N, 4)`` clouds with intensity). Every method's
+    result has passed :func:`lidarcal.check` (``result.check``). ``"auto"`` runs every applicable
+    method and ranks the certified results by their certificate (agreement with the other cloud's
+    surface at the noise scale, less free-space violations, both ways); within 0.01 of the best
+    the earlier method wins. When two certified results disagree beyond their tolerance and
+    their certificates do not clearly separate them it raises :class:`CalibrationError` of kind
+    ``"inconsistent_methods"``. The result's ``method`` names the method. Raises
+    :class:`CalibrationError` (with ``kind``) listing each method's reason when none succeeds,
+    ``ValueError`` for malformed input or an unknown method.
     """
     ref = _cloud(reference, "reference")
     tgt = _cloud(target, "target")
@@ -143,6 +146,8 @@ class RigCalibration:
     direct: dict[str, F64Array]
     edges: list[RigEdge]
     failures: dict[tuple[str, str], str] = field(default_factory=dict)
+    #: The :class:`CalibrationError` kind of each failure (None: calibrated but barely overlapping).
+    failure_kinds: dict[tuple[str, str], str | None] = field(default_factory=dict)
     #: Targets no calibration connects to the reference (only with ``require_all=False``).
     unconnected: list[str] = field(default_factory=list)
 
@@ -245,5 +250,6 @@ def calibrate_rig(
             for a, b, m, z, rot, trans, result in out["edges"]
         ],
         failures=dict(out["failures"]),
+        failure_kinds=dict(out["failure_kinds"]),
         unconnected=list(out["unconnected"]),
     )

@@ -4,6 +4,9 @@
 ``.bin``, ``.npy``, CSV/TXT, or a ROS bag with ``--topic``) to the reference and prints or writes
 the transforms (``--output x.yaml|.json|.txt|.urdf``, ``--json``, ``--plot x.png``).
 
+``lidarcal check REFERENCE TARGET --transform FILE`` checks a stored transform against the two
+clouds (exit 0 consistent, 2 inconsistent, 3 unverifiable).
+
 ``lidarcal demo`` simulates a building corner seen by two LiDARs, calibrates it with no initial
 guess and prints the ground truth, the estimate and the errors (``--json`` for scripts).
 
@@ -388,9 +391,14 @@ def _plot(
         raise click.ClickException(f"{png}: {e}") from e
 
 
-def _error_entry(reference: Source, target: Source, message: str) -> dict[str, Any]:
-    """The result entry of a target that could not be calibrated."""
-    return {"reference": reference.text, "target": target.text, "error": message}
+def _error_entry(
+    reference: Source, target: Source, error: Exception | str, kind: str | None = None
+) -> dict[str, Any]:
+    """The result entry of a target that could not be calibrated; ``kind`` is the
+    :class:`CalibrationError` kind (``None`` for bad input or a file problem)."""
+    if isinstance(error, CalibrationError):
+        kind = getattr(error, "kind", kind)
+    return {"reference": reference.text, "target": target.text, "error": str(error), "kind": kind}
 
 
 def _rig_entries(
@@ -420,7 +428,7 @@ def _rig_entries(
             **_method_kwargs(options),
         )
     except (ValueError, CalibrationError) as e:
-        return [_error_entry(reference, s, str(e)) for s, _ in named.values()]
+        return [_error_entry(reference, s, e) for s, _ in named.values()]
     entries: list[dict[str, Any]] = []
     for name, (source, points) in named.items():
         touching = [e for e in rig.edges if name in (e.a, e.b) and e.result is not None]
@@ -429,7 +437,8 @@ def _rig_entries(
                 f"{a} -> {b}: {m}" for (a, b), m in rig.failures.items() if name in (a, b)
             )
             message = f"not connected to the reference ({reasons})"
-            entries.append(_error_entry(reference, source, message))
+            kinds = [k for (a, b), k in rig.failure_kinds.items() if name in (a, b) and k]
+            entries.append(_error_entry(reference, source, message, kinds[0] if kinds else None))
             continue
         # The direct edge when there is one, else the edge through which the target was placed.
         edge = next((e for e in touching if e.a == "reference"), touching[0])
@@ -475,8 +484,8 @@ def _rig_entries(
     type=click.Choice(["auto", "planes", "targetless", "poles"]),
     default="auto",
     show_default=True,
-    help="auto: try every method that applies and keep the one under which most target points "
-    "land on the reference. planes: a wall corner (three planes) seen by both sensors. "
+    help="auto: try every method that applies and keep the certified result that fits best "
+    "(refused when two disagree). planes: a wall corner (three planes) seen by both sensors. "
     "targetless: the planes of any scene (streets, facades, ground). poles: two or more poles "
     "wrapped in retro-reflective tape (the clouds need intensity).",
 )
@@ -606,7 +615,7 @@ def calibrate(
             try:
                 loaded.append((target, load_cloud(target, crop_box, topic, bag_time)))
             except (ValueError, OSError) as e:
-                entries.append(_error_entry(reference, target, str(e)))
+                entries.append(_error_entry(reference, target, e))
         if loaded:
             entries.extend(_rig_entries(reference, ref_points, loaded, method, options, plot))
             order = {t.text: i for i, t in enumerate(targets)}
@@ -629,7 +638,7 @@ def calibrate(
                     tgt_points = load_cloud(target, crop_box, topic, bag_time)
                     result = _calibrate(method, ref_points, tgt_points, options)
                 except (ValueError, OSError, CalibrationError) as e:
-                    entries.append(_error_entry(reference, target, str(e)))
+                    entries.append(_error_entry(reference, target, e))
                     continue
                 entry = to_dict(
                     result,
@@ -668,11 +677,102 @@ def calibrate(
             click.echo(_summary(entry, entry["reference_frame"], entry["target_frame"]))
         if output is not None and good:
             click.echo(f"wrote {output}")
-    failures = [f"{e['target']}: {e['error']}" for e in entries if "error" in e]
+    failures = [
+        (f" [{e['kind']}]" if e.get("kind") else "") + f": {e['target']}: {e['error']}"
+        for e in entries
+        if "error" in e
+    ]
     for message in failures:
-        click.echo(f"Error: {message}", err=True)
+        click.echo(f"Error{message}", err=True)
     if failures:
         sys.exit(1)
+
+
+#: Exit status of ``lidarcal check`` per verdict.
+CHECK_EXIT = {"consistent": 0, "inconsistent": 2, "unverifiable": 3}
+
+
+@main.command("check")
+@click.argument("reference", type=SourceType())
+@click.argument("target", type=SourceType())
+@click.option(
+    "--transform",
+    "transform_file",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    required=True,
+    help="The reference_from_target to check: a result this tool wrote (.yaml, .json, .txt, "
+    ".urdf) or a bare 4x4 text matrix.",
+)
+@click.option(
+    "--target",
+    "target_name",
+    help="Which transform of a file holding several: the target's file name, stem or frame id "
+    "(for URDF the joint's child link).",
+)
+@click.option(
+    "--crop",
+    metavar="XMIN,XMAX,YMIN,YMAX,ZMIN,ZMAX",
+    help="Keep only points inside this box (metres, each cloud in its own frame).",
+)
+@click.option("--topic", help="For bags: the PointCloud2 topic (needed if there are several).")
+@click.option("--time", "bag_time", type=float, help="For bags: the frame's time.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object.")
+def check_command(
+    reference: Source,
+    target: Source,
+    transform_file: Path,
+    target_name: str | None,
+    crop: str | None,
+    topic: str | None,
+    bag_time: float | None,
+    as_json: bool,
+) -> None:
+    """Check a stored transform against what REFERENCE and TARGET see now.
+
+    Prints the verdict (consistent, inconsistent or unverifiable), its reason and the evidence:
+    overlap, agreement with the other cloud's surface, points in the other sensor's free space,
+    the correction a local re-alignment applies and the smallest errors this scene detects.
+
+    \b
+    Examples:
+      lidarcal check top.pcd left.pcd --transform rig.yaml --target left
+      lidarcal check top.pcd left.pcd --transform left_to_top.txt --json
+
+    Exit status: 0 consistent, 2 inconsistent, 3 unverifiable, 1 for an error.
+    """
+    from lidarcal.export import read_transform
+
+    crop_box = _floats(crop, 6, "--crop")
+    try:
+        transform = read_transform(transform_file, target_name)
+        ref_points = load_cloud(reference, crop_box, topic, bag_time)
+        tgt_points = load_cloud(target, crop_box, topic, bag_time)
+        report = lidarcal.check(ref_points, tgt_points, transform)
+    except (ValueError, OSError) as e:
+        raise click.ClickException(str(e)) from e
+    if as_json:
+        out = {
+            "reference": reference.text,
+            "target": target.text,
+            "transform": transform.tolist(),
+            **report.to_dict(),
+        }
+        click.echo(json.dumps(out))
+    else:
+        click.echo(f"{target.text} -> {reference.text}: {report.verdict}")
+        click.echo(f"  {report.reason}")
+        click.echo(
+            f"  overlap {100 * report.overlap:.0f} %, agreement {100 * report.agreement:.0f} % / "
+            f"{100 * report.reverse_agreement:.0f} %, free-space violations "
+            f"{100 * report.violations:.1f} % / {100 * report.reverse_violations:.1f} %"
+        )
+        click.echo(
+            f"  correction {report.correction_rotation_deg:.3f} deg / "
+            f"{100 * report.correction_translation_m:.1f} cm; detects "
+            f"{report.detectable_rotation_deg:.2f} deg / "
+            f"{100 * report.detectable_translation_m:.1f} cm"
+        )
+    sys.exit(CHECK_EXIT[report.verdict])
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -185,7 +185,137 @@ def to_dict(
             icp_fitness=result.icp_fitness,
         )
     out["diagnostics"] = diagnostics
+    out["check"] = result.check.to_dict()
     return out
+
+
+def from_rpy(angles: npt.ArrayLike) -> F64Array:
+    """The rotation ``Rz(yaw) @ Ry(pitch) @ Rx(roll)`` of ``[roll, pitch, yaw]`` (radians): the
+    inverse of :func:`rpy` and URDF's ``origin rpy``."""
+    roll, pitch, yaw = (float(v) for v in np.asarray(angles, dtype=np.float64).reshape(3))
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(roll),
+        math.sin(roll),
+        math.cos(pitch),
+        math.sin(pitch),
+        math.cos(yaw),
+        math.sin(yaw),
+    )
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    out: F64Array = rz @ ry @ rx
+    return out
+
+
+def _pick(path: Path, candidates: list[tuple[list[str], Any]], target: str | None) -> Any:
+    """The one candidate (names, value) for ``target``, or the only one when ``target`` is None."""
+    if not candidates:
+        raise ValueError(f"{path}: holds no transform")
+    if target is None:
+        if len(candidates) > 1:
+            listed = ", ".join(n[0] for n, _ in candidates if n)
+            raise ValueError(
+                f"{path}: holds {len(candidates)} transforms ({listed}); pass --target"
+            )
+        return candidates[0][1]
+    wanted = {target, frame_id(target, target), Path(target).stem, frame_id(Path(target).stem, "")}
+    for names, value in candidates:
+        if wanted & set(names):
+            return value
+    known = ", ".join(n[0] for n, _ in candidates if n)
+    raise ValueError(f"{path}: no transform for target {target!r} (it holds: {known})")
+
+
+def _entry_names(e: dict[str, Any]) -> list[str]:
+    names = [str(e[k]) for k in ("target_frame", "target") if e.get(k)]
+    names += [Path(n).stem for n in names] + [Path(n).name for n in names]
+    return names
+
+
+def read_transform(path: str | Path, target: str | None = None) -> F64Array:
+    """Reads a 4x4 ``reference_from_target`` from a file this package wrote (``.yaml``/``.yml``,
+    ``.json``, ``.txt``, ``.urdf``) or from a bare 4x4 text matrix. ``target`` picks one of
+    several (a target file name, its stem or its frame id; for URDF the joint's child link).
+    Raises ``ValueError`` naming the file and the problem, ``OSError`` when it cannot be read."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    text = path.read_text()
+    if ext in (".json", ".yaml", ".yml"):
+        if ext == ".json":
+            try:
+                data = json.loads(text)
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{path}: not valid JSON ({e})") from e
+        else:
+            try:
+                import yaml
+            except ImportError as e:  # pragma: no cover - pyyaml is a dependency
+                raise ValueError(f"{path}: reading YAML needs PyYAML") from e
+            try:
+                data = yaml.safe_load(text)
+            except yaml.YAMLError as e:
+                raise ValueError(f"{path}: not valid YAML ({e})") from e
+        if isinstance(data, dict) and "results" in data:
+            data = data["results"]
+        items = data if isinstance(data, list) else [data]
+        found = [
+            (_entry_names(e), e["transform"])
+            for e in items
+            if isinstance(e, dict) and "transform" in e
+        ]
+        matrix = np.asarray(_pick(path, found, target), dtype=np.float64)
+    elif ext == ".urdf":
+        import xml.etree.ElementTree as ET
+
+        try:
+            root = ET.fromstring(text)
+        except ET.ParseError as e:
+            raise ValueError(f"{path}: not valid URDF/XML ({e})") from e
+        joints = []
+        for joint in root.iter("joint"):
+            child, origin = joint.find("child"), joint.find("origin")
+            if child is None:
+                continue
+            pose = np.eye(4)
+            if origin is not None:
+                try:
+                    xyz = [float(v) for v in origin.get("xyz", "0 0 0").split()]
+                    angles = [float(v) for v in origin.get("rpy", "0 0 0").split()]
+                except ValueError as e:
+                    raise ValueError(f"{path}: a joint origin is not numeric ({e})") from e
+                if len(xyz) != 3 or len(angles) != 3:
+                    raise ValueError(f"{path}: a joint origin needs 3 xyz and 3 rpy values")
+                pose[:3, :3] = from_rpy(angles)
+                pose[:3, 3] = xyz
+            joints.append(([str(child.get("link"))], pose))
+        matrix = np.asarray(_pick(path, joints, target))
+    else:
+        blocks: list[tuple[list[str], list[list[float]]]] = []
+        rows: list[list[float]] = []
+        names: list[str] = []
+        for number, line in enumerate(text.splitlines(), 1):
+            line = line.strip()
+            if not line:
+                continue
+            if line.startswith("#"):
+                if "<-" in line:
+                    name = line.rsplit("<-", 1)[1].strip()
+                    names = [name, Path(name).stem, Path(name).name]
+                continue
+            try:
+                rows.append([float(v) for v in line.replace(",", " ").split()])
+            except ValueError as e:
+                raise ValueError(f"{path}:{number}: not a row of numbers: {line!r}") from e
+            if len(rows) == 4:
+                blocks.append((names, rows))
+                rows, names = [], []
+        if rows:
+            raise ValueError(f"{path}: {len(rows)} trailing row(s); a transform is 4 rows of 4")
+        matrix = np.asarray(_pick(path, blocks, target), dtype=np.float64)
+    if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
+        raise ValueError(f"{path}: the transform must be a finite 4x4 matrix, got {matrix.shape}")
+    return matrix
 
 
 def _yaml_scalar(v: Any) -> str:

@@ -909,10 +909,13 @@ fn calibrate_rig<'py>(
         .collect::<PyResult<Vec<_>>>()?;
     d.set_item("edges", edges)?;
     let failures = PyDict::new(py);
+    let failure_kinds = PyDict::new(py);
     for f in &out.failures {
         failures.set_item((f.a.clone(), f.b.clone()), f.reason.clone())?;
+        failure_kinds.set_item((f.a.clone(), f.b.clone()), f.kind.map(|k| k.name()))?;
     }
     d.set_item("failures", failures)?;
+    d.set_item("failure_kinds", failure_kinds)?;
     d.set_item("unconnected", out.unconnected)?;
     Ok(d)
 }
