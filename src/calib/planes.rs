@@ -76,6 +76,9 @@ pub const THRESHOLD_SAMPLE: usize = 4000;
 /// Bounds of an estimated threshold (metres).
 pub const THRESHOLD_RANGE: (f64, f64) = (0.01, 0.5);
 
+/// Default of [`PlanarOptions::min_plane_width`] (metres).
+pub const MIN_PLANE_WIDTH: f64 = 1.0;
+
 /// Options of [`calibrate_planes`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarOptions {
@@ -94,6 +97,11 @@ pub struct PlanarOptions {
     pub loss: Option<Loss>,
     /// Fewest inliers a plane needs.
     pub min_inliers: usize,
+    /// Smallest width (metres) of each plane's inliers, their extent along the shorter in-plane
+    /// axis: a
+    /// corner is made of walls and ground, and the faces of a box or a car (0.4 m across in a
+    /// pole scene whose box was taken for the corner, 90 degrees off) are refused.
+    pub min_plane_width: f64,
     /// Levenberg–Marquardt options.
     pub lm: LmOptions,
     /// Wall-clock budget: past it the calibration stops with [`Error::Calibration`] (see
@@ -112,12 +120,13 @@ impl Default for PlanarOptions {
             refine: true,
             loss: None,
             min_inliers: 50,
+            min_plane_width: MIN_PLANE_WIDTH,
             lm: LmOptions {
                 cost_tolerance: CALIBRATION_COST_TOLERANCE,
                 ..LmOptions::default()
             },
             time_budget: None,
-            check: CheckOptions::gross(),
+            check: CheckOptions::fitted(),
         }
     }
 }
@@ -332,6 +341,37 @@ fn irls(
     Ok(solution)
 }
 
+/// `Err(TooFewFeatures)` when a plane's inliers span less than `min_width` along their shorter
+/// in-plane axis (the side of a uniform patch with that spread, `sqrt(12 l)`).
+fn check_widths(
+    points: &[Point3<f64>],
+    found: &[ExtractedPlane],
+    min_width: f64,
+    which: &str,
+) -> Result<()> {
+    for (k, plane) in found.iter().enumerate() {
+        let moments = Moments::from_points(
+            &plane
+                .inliers
+                .iter()
+                .filter_map(|&i| points.get(i).copied())
+                .collect::<Vec<_>>(),
+        );
+        let (values, _) = moments.principal_axes();
+        let width = (12.0 * values[1] / moments.weight().max(1.0)).sqrt();
+        if width < min_width {
+            return Err(Error::calibration(
+                FailureKind::TooFewFeatures,
+                format!(
+                    "{which} cloud: plane {k} spans only {width:.2} m across (< min_plane_width \
+                     {min_width} m): the face of a box or a post, not a wall or the ground"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Prefixes calibration errors with the cloud they concern.
 fn with_cloud(e: Error, which: &str) -> Error {
     match e {
@@ -518,6 +558,12 @@ pub fn calibrate_planes(
     clock.lap("planes");
     deadline.check("plane extraction")?;
 
+    for (points, found, which) in [
+        (reference, &found_ref, "reference"),
+        (target, &found_tgt, "target"),
+    ] {
+        check_widths(points, found, options.min_plane_width, which)?;
+    }
     let planes_ref = to_array(&found_ref.iter().map(|p| p.plane).collect::<Vec<_>>())?;
     let planes_tgt_rh = to_array(&found_tgt.iter().map(|p| p.plane).collect::<Vec<_>>())?;
     check_conditioning(&planes_ref, "reference")?;

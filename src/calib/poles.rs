@@ -8,9 +8,11 @@
 //!    Leishen, RoboSense 200); an explicit `intensity_threshold` wins over it. With neither, the
 //!    threshold comes from the data ([`data_threshold`]): retro-reflective returns are saturated
 //!    outliers of the intensity distribution, separated from the diffuse returns by a wide empty
-//!    range, so the threshold is the middle of the widest gap between consecutive sorted
-//!    intensities above the median, required to span at least [`MIN_INTENSITY_GAP`] of the
-//!    intensity range (otherwise the cloud has no clear bright class and is refused).
+//!    range, so the threshold is the middle of the **highest** gap between consecutive sorted
+//!    intensities above the median that spans at least [`MIN_INTENSITY_GAP`] of the intensity
+//!    range and leaves at least [`MIN_BRIGHT_CLASS`] returns above it (tape is the brightest
+//!    class: a bright facade opens a wider gap below itself); without one the cloud has no clear
+//!    bright class and is refused.
 //! 2. **Clustering.** The bright points are grouped by Euclidean clustering
 //!    ([`crate::cluster::euclidean_clusters`], our own hash grid: no new dependency, O(N) for a
 //!    fixed tolerance) with [`PoleOptions::cluster_tolerance`], which must exceed the gap between
@@ -134,8 +136,11 @@ pub const SAME_POSE_DISTANCE: f64 = 0.05;
 pub const AMBIGUITY_MARGIN: f64 = 1.0;
 /// A score margin below this refuses the calibration: the best two are indistinguishable.
 pub const REFUSE_MARGIN: f64 = 0.2;
-/// The widest intensity gap must span at least this fraction of the intensity range.
+/// The automatic threshold's gap must span at least this fraction of the intensity range.
 pub const MIN_INTENSITY_GAP: f64 = 0.1;
+/// Fewest returns above the automatic threshold's gap: a handful of saturated returns above the
+/// tape is not the tape class.
+pub const MIN_BRIGHT_CLASS: usize = 20;
 /// Largest RMS of a pole's cylinder fit (metres): a flat strip of a sign does not fit.
 pub const MAX_CYLINDER_RMS: f64 = 0.03;
 /// Line inlier distance when splitting a merged cluster with an unknown radius (metres).
@@ -274,7 +279,7 @@ impl Default for PoleOptions {
                 ..LmOptions::default()
             },
             time_budget: None,
-            check: CheckOptions::gross(),
+            check: CheckOptions::poles(),
             max_bright_fraction: MAX_BRIGHT_FRACTION,
         }
     }
@@ -395,9 +400,18 @@ pub fn data_threshold(intensities: &[f64]) -> Result<f64> {
     v.sort_by(|a, b| a.total_cmp(b));
     let (lo, hi) = (v[0], v[v.len() - 1]);
     let range = hi - lo;
+    // Tape is the brightest class: take the highest gap above the median that is wide enough
+    // and leaves at least MIN_BRIGHT_CLASS returns above it, not the widest gap (a bright facade
+    // between the clutter and the tape opens a wider gap below itself and was taken for tape).
+    let upper = &v[v.len() / 2..];
     let mut best = (0.0, hi);
-    for w in v[v.len() / 2..].windows(2) {
+    for (k, w) in upper.windows(2).enumerate().rev() {
         let gap = w[1] - w[0];
+        let above = upper.len() - (k + 1);
+        if above >= MIN_BRIGHT_CLASS && range > 0.0 && gap >= MIN_INTENSITY_GAP * range {
+            best = (gap, 0.5 * (w[0] + w[1]));
+            break;
+        }
         if gap > best.0 {
             best = (gap, 0.5 * (w[0] + w[1]));
         }

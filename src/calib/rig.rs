@@ -37,7 +37,7 @@ use crate::calib::planes::{calibrate_planes, PlanarCalibration, PlanarOptions};
 use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
 use crate::calib::targetless::pose_error;
 use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
-use crate::check::{check, CheckOptions, CheckReport};
+use crate::check::CheckReport;
 use crate::geometry::{se3_exp, se3_log};
 use crate::icp::SurfaceCloud;
 use crate::{Error, FailureKind, Result};
@@ -313,35 +313,17 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     if results.len() == 1 {
         return Ok(results.remove(0));
     }
-    // Every result passed its method's check. Rank them by the certificate, with one noise scale
-    // for all (each check measured its own, and a worse pose measures a larger one).
-    let noise = results
-        .iter()
-        .map(|c| c.check().noise)
-        .fold(f64::INFINITY, f64::min);
-    let check_options = CheckOptions {
-        noise: Some(noise),
-        ..options.targetless.check
-    };
-    let reports = results
-        .iter()
-        .map(|c| {
-            check(
-                reference.points,
-                target.points,
-                c.reference_from_target(),
-                &check_options,
-            )
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let scores: Vec<f64> = reports.iter().map(certificate_score).collect();
+    // Every result passed its method's check. Rank them by the certificate (the noise scale of
+    // the agreement comes from the clouds alone, so the reports compare directly).
+    let reports: Vec<&CheckReport> = results.iter().map(Calibration::check).collect();
+    let scores: Vec<f64> = reports.iter().map(|r| certificate_score(r)).collect();
     let best = scores.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let pick = scores
         .iter()
         .position(|s| *s >= best - options.auto_tie)
         .unwrap_or(0);
     for (i, other) in results.iter().enumerate() {
-        let (chosen, rival) = (&reports[pick], &reports[i]);
+        let (chosen, rival) = (reports[pick], reports[i]);
         let (angle, distance) = pose_error(
             results[pick].reference_from_target(),
             other.reference_from_target(),

@@ -124,11 +124,6 @@ pub const VERIFY_REFERENCE_SAMPLES: usize = 2000;
 /// VIOLATION_WEIGHT (v_target + v_reference)`, each `v` the share of a cloud's checked points that
 /// fall into space the other sensor saw through ([`crate::visibility`]).
 pub const VIOLATION_WEIGHT: f64 = 3.0;
-/// Bin size of the verification's range images (radians, 0.5 degrees): a point is tested only
-/// where the other scan has a return in its own bin, and finer bins than the 1 degree default
-/// keep box edges and grazing ground out of the count (they penalised the truth of two
-/// identical boxes more than their 180-degree turn).
-const VISIBILITY_RESOLUTION: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// Yaw step of the ground sweep (radians, 15 degrees): the hypotheses that level the largest
 /// plane of each cloud onto the other's and turn about its normal.
 pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
@@ -155,7 +150,7 @@ pub const SCREEN_REFERENCE_SAMPLES: usize = 700;
 /// Distinct hypotheses (best screening scores) that go on to the full verification.
 pub const SCREEN_KEEP: usize = 12;
 /// The result is ambiguous when a distinct pose scores at least this share of the best.
-pub const AMBIGUITY_RATIO: f64 = 0.8;
+pub const AMBIGUITY_RATIO: f64 = 0.75;
 /// Bounds of the inlier threshold taken from the noise estimate (metres). Road scenes are not
 /// flat (camber, kerbs, pavements): when the estimate fails or exceeds the upper bound, the upper
 /// bound is used.
@@ -1164,8 +1159,8 @@ pub fn calibrate_targetless(
     clock.lap("hypotheses");
 
     let surface = SurfaceCloud::new(reference_ds.points.clone())?;
-    let reference_image = RangeImage::new(&reference_ds.points, VISIBILITY_RESOLUTION)?;
-    let target_image = RangeImage::new(&target_ds.points, VISIBILITY_RESOLUTION)?;
+    let reference_image = RangeImage::new(&reference_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
+    let target_image = RangeImage::new(&target_ds.points, RangeImage::DEFAULT_RESOLUTION)?;
     clock.lap("normals");
 
     // Verification in two stages: a quick ICP and score for every hypothesis (screening), then

@@ -605,12 +605,13 @@ fn calibrate_planes(
         refine,
         loss,
         min_inliers,
+        min_plane_width: crate::calib::planes::MIN_PLANE_WIDTH,
         lm: LmOptions {
             max_iterations,
             ..PlanarOptions::default().lm
         },
         time_budget,
-        check: crate::check::CheckOptions::gross(),
+        check: crate::check::CheckOptions::fitted(),
     };
     let inner = run(py, move || {
         rs_calibrate_planes(&reference, &target, &options)
@@ -625,7 +626,7 @@ fn calibrate_planes(
 /// reference, target: (N, 4) clouds [x, y, z, intensity] in their sensors' frames.
 /// intensity_threshold: returns at or above it are tape; wins over vendor.
 /// vendor: "velodyne" (230), "hesai", "leishen" or "robosense" (200); with neither, the threshold
-///     is the middle of the widest intensity gap above the median.
+///     is the middle of the highest wide intensity gap above the median (tape is the brightest).
 /// pole_radius: metres, or None to estimate it per pole. axis_fit: "cylinder" (default) or "line"
 ///     (the seed's centroid line, biased by up to a radius; for comparison).
 /// Raises ValueError for malformed input and CalibrationError with the reason (no bright points,

@@ -180,10 +180,10 @@ def test_cli_prints_the_kind_of_a_refusal(tmp_path: Path) -> None:
     assert entry["kind"] in KINDS and entry["error"]
 
 
-#: Hard cases the certification does not catch yet (issue 15 open): a pose 10 m off for sensors
-#: 7.4 m apart that agrees locally better than the truth, and two identical boxes turned 180 deg.
-#: Strict: once they are refused or solved the test fails and the mark must go.
-STILL_WRONG = {"partial_28_targetless.npz", "repeated_0_targetless.npz"}
+#: The hard case the certification does not catch yet (issue 15 open): a pose 10 m off for sensors
+#: 7.4 m apart, agreeing with more of the scene than the truth (whose overlap is small) and
+#: consistent to every local test. Strict: once it is refused or solved the mark must go.
+STILL_WRONG = {"partial_28_targetless.npz"}
 
 
 HARD_CASES = [
