@@ -77,7 +77,7 @@ pub const THRESHOLD_SAMPLE: usize = 4000;
 pub const THRESHOLD_RANGE: (f64, f64) = (0.01, 0.5);
 
 /// Default of [`PlanarOptions::min_plane_width`] (metres).
-pub const MIN_PLANE_WIDTH: f64 = 1.0;
+pub const MIN_PLANE_WIDTH: f64 = 0.5;
 
 /// Options of [`calibrate_planes`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -98,9 +98,9 @@ pub struct PlanarOptions {
     /// Fewest inliers a plane needs.
     pub min_inliers: usize,
     /// Smallest width (metres) of each plane's inliers, their extent along the shorter in-plane
-    /// axis: a
-    /// corner is made of walls and ground, and the faces of a box or a car (0.4 m across in a
-    /// pole scene whose box was taken for the corner, 90 degrees off) are refused.
+    /// axis: a corner is made of walls and ground, and the faces of a box or a car (0.4 m across
+    /// in a pole scene whose box was taken for the corner, 90 degrees off) are refused. At 1 m,
+    /// walls seen by few rings (0.7-0.99 m across) were refused in 8 of 1000 adversarial scenes.
     pub min_plane_width: f64,
     /// Levenberg–Marquardt options.
     pub lm: LmOptions,
