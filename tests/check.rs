@@ -1,0 +1,81 @@
+//! `lidarcal::check`: verdicts on simulated scenes with known truth, the gate `certify`, bad input.
+
+use lidarcal::check::{certify, check, CheckOptions, Verdict};
+use lidarcal::sim::scenes::{corridor_scene, street_scene, StreetOptions};
+use lidarcal::{Error, FailureKind};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+#[test]
+fn the_truth_is_consistent_and_gross_errors_are_not() {
+    let scene = street_scene(&StreetOptions::default()).unwrap();
+    let (reference, target) = (scene.reference.positions(), scene.target.positions());
+    let truth = scene.reference_from_target;
+    let options = CheckOptions::default();
+    let report = check(&reference, &target, &truth, &options).unwrap();
+    assert_eq!(report.verdict, Verdict::Consistent, "{report}");
+    assert!(report.failure.is_none());
+    assert!(report.correction_translation < 0.02 && report.correction_rotation < 0.002);
+    assert!(certify(&reference, &target, &truth, &options).is_ok());
+
+    let turned = truth * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 3.0);
+    let shifted = Translation3::new(0.0, 0.0, 0.25) * truth;
+    let tilted = truth * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 2f64.to_radians());
+    for wrong in [turned, shifted, tilted] {
+        let report = check(&reference, &target, &wrong, &options).unwrap();
+        assert_ne!(report.verdict, Verdict::Consistent, "{report}");
+        let err = certify(&reference, &target, &wrong, &options).unwrap_err();
+        assert!(err.kind().is_some(), "{err}");
+    }
+}
+
+#[test]
+fn a_corridor_is_unverifiable_and_certify_says_unobservable() {
+    let scene = corridor_scene(0).unwrap();
+    let (reference, target) = (scene.reference.positions(), scene.target.positions());
+    let options = CheckOptions::default();
+    let report = check(&reference, &target, &scene.reference_from_target, &options).unwrap();
+    assert_eq!(report.verdict, Verdict::Unverifiable, "{report}");
+    assert_eq!(report.failure, Some(FailureKind::Unobservable));
+    let err = certify(&reference, &target, &scene.reference_from_target, &options).unwrap_err();
+    assert_eq!(err.kind(), Some(FailureKind::Unobservable), "{err}");
+}
+
+#[test]
+fn clouds_that_do_not_overlap_are_unverifiable() {
+    let scene = street_scene(&StreetOptions::default()).unwrap();
+    let (reference, target) = (scene.reference.positions(), scene.target.positions());
+    let far = Translation3::new(500.0, 0.0, 0.0) * scene.reference_from_target;
+    let report = check(&reference, &target, &far, &CheckOptions::default()).unwrap();
+    assert_eq!(report.verdict, Verdict::Unverifiable);
+    assert_eq!(report.failure, Some(FailureKind::TooFewFeatures));
+}
+
+#[test]
+fn bad_input_is_an_error_not_a_verdict() {
+    let scene = street_scene(&StreetOptions::default()).unwrap();
+    let (reference, mut target) = (scene.reference.positions(), scene.target.positions());
+    let options = CheckOptions::default();
+    let pose = Isometry3::identity();
+    assert!(matches!(
+        check(&reference[..5], &target, &pose, &options),
+        Err(Error::InvalidInput(_))
+    ));
+    let bad = CheckOptions {
+        min_agreement: 1.5,
+        ..options
+    };
+    assert!(matches!(
+        check(&reference, &target, &pose, &bad),
+        Err(Error::InvalidInput(m)) if m.contains("min_agreement")
+    ));
+    let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
+    assert!(matches!(
+        check(&reference, &target, &nan, &options),
+        Err(Error::InvalidInput(_))
+    ));
+    target[7].x = f64::INFINITY;
+    assert!(matches!(
+        check(&reference, &target, &pose, &options),
+        Err(Error::InvalidInput(_))
+    ));
+}
