@@ -18,8 +18,10 @@
 //!   front of its nearest return along the same ray, [`crate::visibility`]) is a **violation**.
 //!   The truth leaves only moving objects there; a turned or shifted pose fills it.
 //! * **Local re-alignment.** Point-to-plane ICP ([`crate::icp`]) from the given pose: the
-//!   **correction** it applies is how far the pose is from the nearest pose the scene prefers. A
-//!   1 degree or 10 cm error is corrected back; the truth moves by the scene's own bias only.
+//!   **correction** it applies is how far the pose is from the nearest pose the scene prefers. On
+//!   the real road pairs a 1 degree error was always pulled back past the tolerance and a 10 cm
+//!   one in 92 % of the trials (`benches/drift.py`); the truth moves by the scene's own bias only
+//!   (at most 0.33 degrees / 5.6 cm there).
 //! * **Observability.** The information matrix of that alignment: its weakest translation and
 //!   rotation directions and their share of the information (a corridor has none along its
 //!   axis), and from its covariance the smallest errors this scene can detect.
@@ -36,7 +38,7 @@
 //! ```
 //! use lidarcal::check::{check, CheckOptions, Verdict};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
-//! use nalgebra::{Translation3, Isometry3};
+//! use nalgebra::Translation3;
 //!
 //! let scene = street_scene(&StreetOptions::default())?;
 //! let (reference, target) = (scene.reference.positions(), scene.target.positions());

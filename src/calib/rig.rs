@@ -1,12 +1,14 @@
-//! One entry point over the calibration methods ([`Method::Auto`] picks the best-fitting one) and
+//! One entry point over the calibration methods ([`Method::Auto`] picks the best certified one) and
 //! the calibration of a whole rig: every target to the reference, every overlapping pair of
 //! targets, and a small pose graph that makes the set consistent.
 //!
 //! * [`calibrate`] runs one method, or for [`Method::Auto`] the corner method, the targetless plane
-//!   matching and (when both clouds carry intensity) the taped poles, keeping the result under
-//!   which most target points land within [`MethodOptions::agreement_distance`] of a reference
-//!   point. A method that fails with [`Error::Calibration`] is skipped (its reason is kept for the
-//!   error when none succeeds); malformed input is returned at once.
+//!   matching and (when both clouds carry intensity) the taped poles. Every result has passed
+//!   [`crate::check`]; `auto` keeps the one with the best certificate (agreement less free-space
+//!   violations) and refuses with [`FailureKind::InconsistentMethods`] when two certified results
+//!   disagree beyond their tolerance and their certificates are within [`AUTO_MARGIN`]. A method
+//!   that fails with [`Error::Calibration`] is skipped (its reason and kind are kept for the error
+//!   when none succeeds); malformed input is returned at once.
 //! * [`calibrate_rig`] builds the edges and refines them with [`refine_pose_graph`]
 //!   (Gauss–Newton on the SE(3) tangent errors, each edge weighted by its information matrix,
 //!   with a step halved whenever it would raise the cost).
@@ -43,7 +45,8 @@ use crate::icp::SurfaceCloud;
 use crate::{Error, FailureKind, Result};
 
 /// Distance (m) within which a mapped target point counts as agreeing with the reference cloud,
-/// for [`Method::Auto`] and for the overlap test of a target pair in [`calibrate_rig`].
+/// for the overlap test of a target pair in [`calibrate_rig`] ([`Method::Auto`] ranks by the
+/// check's certificate instead).
 pub const AGREEMENT_DISTANCE: f64 = 0.25;
 
 /// [`Method::Auto`] prefers the earlier method (corner, targetless, poles) when its certificate

@@ -795,9 +795,10 @@ fn borrow_cloud(c: &OwnedCloud) -> crate::Result<Cloud<'_>> {
 }
 
 /// calibrate(method="auto") in Rust: the corner method, the targetless method and, when both
-/// clouds are (N, 4), the poles; the result under which most target points lie within 25 cm of a
-/// reference point (within 0.01 of the best, the earlier method wins). Raises CalibrationError
-/// listing each method's reason when none succeeds.
+/// clouds are (N, 4), the poles; each result certified by check, the best certificate kept
+/// (within 0.01 of the best, the earlier method wins). Raises CalibrationError (with kind) listing
+/// each method's reason when none succeeds, or of kind "inconsistent_methods" when two certified
+/// results disagree.
 #[pyfunction]
 #[pyo3(signature = (reference, target, *, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
