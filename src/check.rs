@@ -54,7 +54,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, SymmetricEigen, Vector3};
 
-use crate::error::{ensure_points, Error, FailureKind, Result};
+use crate::error::{ensure_points, ensure_positive, Error, FailureKind, Result};
 use crate::geometry::{rotation_angle, se3_log};
 use crate::icp::{
     point_to_plane_icp_with_normals, voxel_downsample, weakest_direction, IcpOptions, SurfaceCloud,
@@ -195,21 +195,12 @@ impl CheckOptions {
 
     /// `Err(InvalidInput)` naming the first option out of range.
     pub fn validate(&self) -> Result<()> {
-        let positive = |name: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::InvalidInput(format!(
-                    "{name} must be finite and positive, got {v}"
-                )))
-            }
-        };
-        positive("voxel_size", self.voxel_size)?;
-        positive("overlap_distance", self.overlap_distance)?;
-        positive("rotation_tolerance", self.rotation_tolerance)?;
-        positive("translation_tolerance", self.translation_tolerance)?;
-        positive("weak_rotation_tolerance", self.weak_rotation_tolerance)?;
-        positive(
+        ensure_positive("voxel_size", self.voxel_size)?;
+        ensure_positive("overlap_distance", self.overlap_distance)?;
+        ensure_positive("rotation_tolerance", self.rotation_tolerance)?;
+        ensure_positive("translation_tolerance", self.translation_tolerance)?;
+        ensure_positive("weak_rotation_tolerance", self.weak_rotation_tolerance)?;
+        ensure_positive(
             "weak_translation_tolerance",
             self.weak_translation_tolerance,
         )?;
@@ -220,7 +211,7 @@ impl CheckOptions {
             )));
         }
         if let Some(n) = self.noise {
-            positive("noise", n)?;
+            ensure_positive("noise", n)?;
         }
         for (name, v) in [
             ("min_overlap", self.min_overlap),
@@ -392,32 +383,14 @@ fn residuals(
 }
 
 /// Share of `points` (their own sensor's frame) that land in `image`'s free space once mapped by
-/// `image_from_points`, of those that land where the image has a return.
+/// `image_from_points`, of those it tests ([`RangeImage::tally`]).
 fn violation_share(
     image: &RangeImage,
     points: &[Point3<f64>],
     image_from_points: &Isometry3<f64>,
 ) -> f64 {
-    let mut seen = 0usize;
-    let mut bad = 0usize;
-    for p in points {
-        if p.coords.norm() < crate::visibility::MIN_VISIBILITY_RANGE {
-            continue;
-        }
-        match image.violation(&(image_from_points * p)) {
-            Some(true) => {
-                seen += 1;
-                bad += 1;
-            }
-            Some(false) => seen += 1,
-            None => {}
-        }
-    }
-    if seen == 0 {
-        0.0
-    } else {
-        bad as f64 / seen as f64
-    }
+    let (violations, tested) = image.tally(points, image_from_points);
+    violations as f64 / tested.max(1) as f64
 }
 
 /// The largest ratio of `correction`'s component along an eigen-direction of the information
@@ -490,8 +463,7 @@ pub fn check(
     // Agreement both ways at the given pose.
     let (overlap_t, mut res_t) = residuals(&r.surface, &g.samples, t, options.overlap_distance);
     let inverse = t.inverse();
-    let (overlap_r, mut res_r) =
-        residuals(&g.surface, &r.samples, &inverse, options.overlap_distance);
+    let (overlap_r, res_r) = residuals(&g.surface, &r.samples, &inverse, options.overlap_distance);
     let (normals_t, normals_r) = (res_t.len(), res_r.len());
     // The noise scale comes from each cloud alone (how thick its surfaces are), never from the
     // residuals under the pose being checked: a pose 10 cm off would otherwise measure a 10 cm
@@ -516,7 +488,6 @@ pub fn check(
     } else {
         (res_t.iter().map(|r| r * r).sum::<f64>() / res_t.len() as f64).sqrt()
     };
-    res_r.clear();
     let overlap = overlap_t as f64 / g.samples.len().max(1) as f64;
     let reverse_overlap = overlap_r as f64 / r.samples.len().max(1) as f64;
 

@@ -142,6 +142,17 @@ impl Error {
 /// Shorthand for `Result<T, lidarcal::Error>`.
 pub type Result<T> = std::result::Result<T, Error>;
 
+/// `Err(InvalidInput)` "`name` must be finite and positive, got `value`" unless it is.
+pub(crate) fn ensure_positive(name: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidInput(format!(
+            "{name} must be finite and positive, got {value}"
+        )))
+    }
+}
+
 /// Returns `Err(InvalidInput)` naming `what` and the first offending index if any value is not finite.
 pub(crate) fn ensure_finite<'a, I>(what: &str, values: I) -> Result<()>
 where

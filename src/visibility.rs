@@ -120,11 +120,28 @@ impl RangeImage {
         points: &[Point3<f64>],
         this_from_points: &Isometry3<f64>,
     ) -> usize {
-        points
+        self.tally(points, this_from_points).0
+    }
+
+    /// As [`count_violations`](Self::count_violations), with the number of points tested (not
+    /// neutral) beside it: `(violations, tested)`.
+    pub fn tally(
+        &self,
+        points: &[Point3<f64>],
+        this_from_points: &Isometry3<f64>,
+    ) -> (usize, usize) {
+        let mut violations = 0;
+        let mut tested = 0;
+        for p in points
             .iter()
             .filter(|p| p.coords.norm() >= MIN_VISIBILITY_RANGE)
-            .filter(|p| self.violation(&(this_from_points * *p)) == Some(true))
-            .count()
+        {
+            if let Some(violates) = self.violation(&(this_from_points * p)) {
+                tested += 1;
+                violations += usize::from(violates);
+            }
+        }
+        (violations, tested)
     }
 }
 

@@ -96,7 +96,7 @@ use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
 use crate::check::{certify, CheckOptions, CheckReport};
 use crate::cluster::{euclidean_clusters_until, Grid};
-use crate::error::{Error, FailureKind, Result};
+use crate::error::{ensure_positive, Error, FailureKind, Result};
 use crate::fit::cylinder::fit_cylinder;
 use crate::fit::Moments;
 use crate::geometry::{Line, Plane};
@@ -462,15 +462,6 @@ fn check_cloud(points: &[Point3<f64>], intensities: &[f64], which: &str) -> Resu
 }
 
 fn check_options(o: &PoleOptions) -> Result<()> {
-    let positive = |name: &str, v: f64| {
-        if v.is_finite() && v > 0.0 {
-            Ok(())
-        } else {
-            Err(Error::InvalidInput(format!(
-                "{name} must be finite and positive, got {v}"
-            )))
-        }
-    };
     if let Some(t) = o.intensity_threshold {
         if !t.is_finite() {
             return Err(Error::InvalidInput(format!(
@@ -479,17 +470,17 @@ fn check_options(o: &PoleOptions) -> Result<()> {
         }
     }
     if let Some(r) = o.pole_radius {
-        positive("pole_radius", r)?;
+        ensure_positive("pole_radius", r)?;
     }
-    positive("cluster_tolerance", o.cluster_tolerance)?;
-    positive("overlap_distance", o.overlap_distance)?;
+    ensure_positive("cluster_tolerance", o.cluster_tolerance)?;
+    ensure_positive("overlap_distance", o.overlap_distance)?;
     if !(o.max_bright_fraction > 0.0 && o.max_bright_fraction <= 1.0) {
         return Err(Error::InvalidInput(format!(
             "max_bright_fraction must be in (0, 1], got {}",
             o.max_bright_fraction
         )));
     }
-    positive("min_elongation", o.min_elongation)?;
+    ensure_positive("min_elongation", o.min_elongation)?;
     if !(o.min_length.is_finite() && o.min_length >= 0.0) {
         return Err(Error::InvalidInput(format!(
             "min_length must be finite and >= 0, got {}",

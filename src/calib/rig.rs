@@ -158,17 +158,6 @@ pub enum Calibration {
 }
 
 impl Calibration {
-    /// The final check's report (consistent for every returned result).
-    pub fn check(&self) -> &CheckReport {
-        match self {
-            Calibration::Planes(c) => &c.check,
-            Calibration::Targetless(c) => &c.check,
-            Calibration::Poles(c) => &c.check,
-        }
-    }
-}
-
-impl Calibration {
     /// The method that produced it (never [`Method::Auto`]).
     pub fn method(&self) -> Method {
         match self {
@@ -184,6 +173,15 @@ impl Calibration {
             Calibration::Planes(c) => &c.reference_from_target,
             Calibration::Targetless(c) => &c.reference_from_target,
             Calibration::Poles(c) => &c.reference_from_target,
+        }
+    }
+
+    /// The final check's report (consistent for every returned result).
+    pub fn check(&self) -> &CheckReport {
+        match self {
+            Calibration::Planes(c) => &c.check,
+            Calibration::Targetless(c) => &c.check,
+            Calibration::Poles(c) => &c.check,
         }
     }
 

@@ -86,7 +86,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 use super::planes::estimate_threshold;
 use super::{Stopwatch, Timings};
 use crate::check::{certify, CheckOptions, CheckReport};
-use crate::error::{ensure_finite, Error, FailureKind, Result};
+use crate::error::{ensure_finite, ensure_positive, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::{rotation_angle, Plane};
 use crate::icp::{
@@ -249,21 +249,12 @@ impl Default for TargetlessOptions {
 
 impl TargetlessOptions {
     fn validate(&self) -> Result<()> {
-        let positive = |name: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::InvalidInput(format!(
-                    "{name} must be finite and positive, got {v}"
-                )))
-            }
-        };
         if let Some(t) = self.distance_threshold {
-            positive("distance_threshold", t)?;
+            ensure_positive("distance_threshold", t)?;
         }
-        positive("voxel_size", self.voxel_size)?;
-        positive("normal_tolerance", self.normal_tolerance)?;
-        positive("offset_tolerance", self.offset_tolerance)?;
+        ensure_positive("voxel_size", self.voxel_size)?;
+        ensure_positive("normal_tolerance", self.normal_tolerance)?;
+        ensure_positive("offset_tolerance", self.offset_tolerance)?;
         if self.max_translation.is_nan() || self.max_translation <= 0.0 {
             return Err(Error::InvalidInput(format!(
                 "max_translation must be positive (or inf), got {}",

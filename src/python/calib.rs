@@ -117,7 +117,11 @@ fn planes_array<'py>(py: Python<'py>, planes: &[Plane]) -> PyResult<Bound<'py, P
     to_numpy(py, Ix2(planes.len(), 4), data)
 }
 
-fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+/// A pose as a (4, 4) row-major array.
+pub(crate) fn matrix4<'py>(
+    py: Python<'py>,
+    pose: &Isometry3<f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     to_numpy(py, Ix2(4, 4), row_major(&pose.to_homogeneous()))
 }
 

@@ -1,11 +1,12 @@
 //! Python wrapper of [`crate::check`]: `check(reference, target, transform) -> CheckReport`.
 
-use nalgebra::{Isometry3, Vector3};
-use numpy::ndarray::{Ix1, Ix2};
+use nalgebra::Vector3;
+use numpy::ndarray::Ix1;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 
-use super::arrays::{self, row_major, to_numpy};
+use super::arrays::{self, to_numpy};
+use super::calib::matrix4;
 use super::run;
 use crate::check::{check as rs_check, CheckOptions, CheckReport as Report};
 use crate::geometry::isometry_from_matrix;
@@ -20,10 +21,6 @@ pub(crate) struct CheckReport {
 
 fn vec3<'py>(py: Python<'py>, v: &Vector3<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
     to_numpy(py, Ix1(3), v.as_slice().to_vec())
-}
-
-fn matrix4<'py>(py: Python<'py>, pose: &Isometry3<f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    to_numpy(py, Ix2(4, 4), row_major(&pose.to_homogeneous()))
 }
 
 #[pymethods]
