@@ -402,6 +402,7 @@ pub fn point_to_plane_icp(
     initial: &Isometry3<f64>,
     options: &IcpOptions,
 ) -> Result<IcpResult> {
+    options.validate()?;
     ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
     let stride = target.len().div_ceil(options.samples).max(1);
     let samples: Vec<Sample> = target.iter().step_by(stride).map(|p| (*p, None)).collect();
@@ -427,6 +428,7 @@ pub fn point_to_plane_icp_with_normals(
             "max_normal_angle must be in [0, pi/2] rad, got {max_normal_angle}"
         )));
     }
+    options.validate()?;
     let points = target.points();
     let stride = points.len().div_ceil(options.samples).max(1);
     let samples: Vec<Sample> = (0..points.len())
@@ -449,7 +451,7 @@ fn icp_on_samples(
     options: &IcpOptions,
     min_normal_cos: f64,
 ) -> Result<IcpResult> {
-    options.validate()?;
+    // `options` were validated by the public entry points (the sample stride divides by them).
     let mut pose = *initial;
     let mut distance = options.max_distance;
     let mut iterations = 0;
@@ -558,6 +560,27 @@ mod tests {
         // the share is far below the targetless refusal threshold (1 %).
         assert!(share < 1e-3, "{share}");
         assert!(dir.x.abs() > 0.999, "{dir}");
+    }
+
+    #[test]
+    fn zero_samples_is_an_error_not_a_division_by_zero() {
+        let pts: Vec<_> = (0..100)
+            .map(|i| Point3::new((i % 10) as f64, (i / 10) as f64, 0.0))
+            .collect();
+        let surface = SurfaceCloud::new(pts.clone()).unwrap();
+        let none = IcpOptions {
+            samples: 0,
+            ..IcpOptions::default()
+        };
+        let start = Isometry3::identity();
+        assert!(matches!(
+            point_to_plane_icp(&surface, &pts, &start, &none),
+            Err(Error::InvalidInput(_))
+        ));
+        assert!(matches!(
+            point_to_plane_icp_with_normals(&surface, &surface, &start, &none, 0.5),
+            Err(Error::InvalidInput(_))
+        ));
     }
 
     #[test]
