@@ -51,7 +51,6 @@
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
-use std::collections::HashMap;
 use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
@@ -86,7 +85,8 @@ pub fn voxel_downsample(
         )));
     }
     ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
-    let mut index: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 2);
+    let mut index: rustc_hash::FxHashMap<[i64; 3], usize> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(points.len() / 2, Default::default());
     let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new();
     let mut owner = Vec::with_capacity(points.len());
     for p in points {
@@ -173,10 +173,16 @@ impl SurfaceCloud {
         m
     }
 
-    fn estimate_normal(&self, p: &Point3<f64>) -> Option<Vector3<f64>> {
-        let (values, vectors) = self.neighbourhood(p).principal_axes();
+    /// The normal of a neighbourhood with these principal axes (smallest first), or `None` when
+    /// it is not a surface.
+    fn surface_normal(values: &[f64; 3], vectors: &[Vector3<f64>; 3]) -> Option<Vector3<f64>> {
         let total = values[0] + values[1] + values[2];
         (total > 0.0 && values[0] <= MAX_SURFACE_VARIATION * total).then_some(vectors[0])
+    }
+
+    fn estimate_normal(&self, p: &Point3<f64>) -> Option<Vector3<f64>> {
+        let (values, vectors) = self.neighbourhood(p).principal_axes();
+        Self::surface_normal(&values, &vectors)
     }
 
     /// The local thickness at point `i`: the RMS distance of its neighbourhood from the
@@ -184,9 +190,11 @@ impl SurfaceCloud {
     /// neighbourhood is not a surface (no [`normal`](Self::normal)). Independent of any pose, it
     /// is the scale a residual against this surface should be compared with.
     pub fn thickness(&self, i: usize) -> Option<f64> {
-        self.normal(i)?;
         let m = self.neighbourhood(self.points.get(i)?);
-        let (values, _) = m.principal_axes();
+        let (values, vectors) = m.principal_axes();
+        // One neighbourhood search for both: the normal is cached as `normal(i)` would.
+        let normal = Self::surface_normal(&values, &vectors);
+        (*self.normals.get(i)?.get_or_init(|| normal))?;
         Some((values[0] / m.weight().max(1.0)).sqrt())
     }
 
@@ -203,11 +211,24 @@ impl SurfaceCloud {
 
     /// The nearest point to `q` within `max_distance`: `(index, squared distance)`.
     pub fn nearest(&self, q: &Point3<f64>, max_distance: f64) -> Option<(usize, f64)> {
-        let (n, d2) = self
-            .tree
-            .nearest_neighbor_iter_with_distance_2(&[q.x, q.y, q.z])
-            .next()?;
-        (d2 <= max_distance * max_distance).then_some((n.data, d2))
+        // A search bounded by the distance: an unbounded nearest-neighbour query from a point far
+        // from the cloud (most of a partial overlap) walks much of the tree.
+        let query = [q.x, q.y, q.z];
+        self.tree
+            .locate_within_distance(query, max_distance * max_distance)
+            .map(|n| {
+                let d = [n.geom()[0] - q.x, n.geom()[1] - q.y, n.geom()[2] - q.z];
+                (n.data, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+    }
+
+    /// Whether some point lies within `distance` of `q`.
+    pub fn any_within(&self, q: &Point3<f64>, distance: f64) -> bool {
+        self.tree
+            .locate_within_distance([q.x, q.y, q.z], distance * distance)
+            .next()
+            .is_some()
     }
 
     /// Fraction of `points`, mapped by `pose` (`reference_from_points`), with a reference point
@@ -413,7 +434,8 @@ pub fn point_to_plane_icp(
 /// the two points' normals (the target's turned by the pose) are within `max_normal_angle`
 /// (radians) of parallel, and target points without a normal are left out. Near the crease of a
 /// sparse corner the nearest reference point often lies on the other surface; the gate keeps
-/// such pairs out (a 16-beam corner otherwise pulled the pose 14 cm from the truth).
+/// such pairs out (a 16-beam corner otherwise pulled the pose 14 cm from the truth). Target
+/// points farther than `2 max_distance` from the reference at `initial` are left out as well.
 pub fn point_to_plane_icp_with_normals(
     reference: &SurfaceCloud,
     target: &SurfaceCloud,
@@ -431,8 +453,17 @@ pub fn point_to_plane_icp_with_normals(
     options.validate()?;
     let points = target.points();
     let stride = points.len().div_ceil(options.samples).max(1);
+    // Points with no reference point within twice the first correspondence distance at the
+    // start stay out: only a pose moving by more than that distance could pair them, and the
+    // search for their nearest point and their normal is most of the work on a partial overlap.
+    let reach = 2.0 * options.max_distance;
     let samples: Vec<Sample> = (0..points.len())
         .step_by(stride)
+        .filter(|&i| {
+            points
+                .get(i)
+                .is_some_and(|p| reference.any_within(&(initial * p), reach))
+        })
         .filter_map(|i| Some((*points.get(i)?, Some(target.normal(i)?))))
         .collect();
     icp_on_samples(
