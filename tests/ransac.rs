@@ -71,6 +71,66 @@ fn extract_planes_recovers_corner_within_a_tenth_of_a_degree() {
 }
 
 #[test]
+fn a_third_wall_in_the_span_of_two_is_passed_over_for_the_floor() {
+    // Three large vertical walls (their normals share a plane: no corner) and a smaller floor.
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut points = Vec::new();
+    let mut patch = |n: usize, f: &dyn Fn(f64, f64) -> Point3<f64>, rng: &mut ChaCha8Rng| {
+        for _ in 0..n {
+            let (u, v) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+            let noise = rng.random_range(-0.01..0.01);
+            let p = f(u, v);
+            points.push(Point3::new(p.x + noise, p.y + noise, p.z + noise));
+        }
+    };
+    patch(
+        3000,
+        &|u, v| Point3::new(6.0, -8.0 + 16.0 * u, -1.5 + 6.0 * v),
+        &mut rng,
+    );
+    patch(
+        2500,
+        &|u, v| Point3::new(-8.0 + 14.0 * u, 7.0, -1.5 + 6.0 * v),
+        &mut rng,
+    );
+    // A far wall at 45 degrees to both.
+    patch(
+        2000,
+        &|u, v| Point3::new(-6.0 + 6.0 * u, -9.0 + 6.0 * u, -1.5 + 6.0 * v),
+        &mut rng,
+    );
+    patch(
+        800,
+        &|u, v| Point3::new(-4.0 + 8.0 * u, -4.0 + 8.0 * v, -1.5),
+        &mut rng,
+    );
+    let options = ExtractOptions::new(3, 0.05);
+    let plain = extract_planes(&points, &options).unwrap();
+    assert!(
+        plain.iter().all(|p| p.plane.normal.z.abs() < 0.1),
+        "without the rule the three walls are taken"
+    );
+    let found = extract_planes(
+        &points,
+        &ExtractOptions {
+            min_angle_between: Some(20f64.to_radians()),
+            ..options
+        },
+    )
+    .unwrap();
+    let floors = found
+        .iter()
+        .filter(|p| p.plane.normal.z.abs() > 0.99)
+        .count();
+    assert_eq!(
+        floors,
+        1,
+        "{:?}",
+        found.iter().map(|p| p.plane.normal).collect::<Vec<_>>()
+    );
+}
+
+#[test]
 fn joint_refinement_removes_the_sequential_tilt() {
     // Noisier walls and a wide threshold, as in the planar seed's protocol: sequential extraction
     // gives the first planes their neighbours' points near the intersection lines.

@@ -190,8 +190,9 @@ fn ransac_line(
 /// joint refinement that gives every point to the only plane within the threshold (points near
 /// two planes, at the intersection lines, are dropped) and refits.
 ///
-/// min_angle_deg: if given, a plane within this angle of an accepted one is discarded (its points
-/// leave the pool) and the search goes on, so the planes found are mutually non-parallel.
+/// min_angle_deg: if given, a plane within this angle of an accepted one, or of the span of two
+/// accepted normals, is discarded (its points leave the pool) and the search goes on, so the
+/// planes found are linearly independent (three walls without a floor are not).
 /// Raises CalibrationError when fewer than `count` planes with at least `min_inliers` inliers exist.
 #[pyfunction]
 #[pyo3(signature = (points, count=3, distance_threshold=0.05, *, min_inliers=50, refinement_rounds=3, min_angle_deg=None, confidence=0.999, max_iterations=10_000, seed=0))]

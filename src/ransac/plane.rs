@@ -128,14 +128,15 @@ pub struct ExtractOptions {
     pub refinement_rounds: usize,
     /// Options of each RANSAC run (threshold, confidence, cap, seed).
     pub ransac: RansacOptions,
-    /// When set (radians), a plane within this angle of an already accepted plane is discarded:
-    /// its points leave the pool and the search goes on (at most [`MAX_DISCARDED`] times). The
-    /// calibration uses it to find three linearly independent planes when a surface comes in two
-    /// parallel parts (a facade with a recessed storey, a curb beside a road).
+    /// When set (radians), a plane within this angle of an already accepted plane, or of the
+    /// span of two accepted planes' normals, is discarded: its points leave the pool and the
+    /// search goes on (at most [`MAX_DISCARDED`] times). The calibration uses it to find three
+    /// linearly independent planes when a surface comes in two parallel parts (a facade with a
+    /// recessed storey, a curb beside a road) or a third wall is larger than the floor.
     pub min_angle_between: Option<f64>,
 }
 
-/// Most planes [`extract_planes`] discards as too parallel to the accepted ones before giving up.
+/// Most planes [`extract_planes`] discards as dependent on the accepted ones before giving up.
 pub const MAX_DISCARDED: usize = 4;
 
 impl ExtractOptions {
@@ -197,6 +198,24 @@ fn assign(points: &[Point3<f64>], planes: &[Plane], threshold: f64) -> Vec<Vec<u
     groups
 }
 
+/// Whether `plane` adds no direction to the `accepted` ones: its normal lies within
+/// `min_angle` of an accepted normal, or of the span of two of them (three walls and no floor:
+/// three normals in one plane fix no corner).
+fn dependent(accepted: &[(Plane, usize)], plane: &Plane, min_angle: f64) -> bool {
+    let n = plane.normal.into_inner();
+    let parallel = accepted
+        .iter()
+        .any(|(a, _)| a.normal.dot(&n).abs() > min_angle.cos());
+    let in_span = accepted.iter().enumerate().any(|(i, (a, _))| {
+        accepted.iter().skip(i + 1).any(|(b, _)| {
+            let axis = a.normal.cross(&b.normal);
+            let norm = axis.norm();
+            norm > 0.0 && (axis.dot(&n) / norm).abs() < min_angle.sin()
+        })
+    });
+    parallel || in_span
+}
+
 fn mix_seed(seed: u64, k: usize) -> u64 {
     // Distinct, well-spread seeds per extracted plane (SplitMix64 increment).
     seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
@@ -244,11 +263,9 @@ pub fn extract_planes(
         for &i in &result.inliers {
             taken[remaining[i]] = true;
         }
-        let too_parallel = options.min_angle_between.is_some_and(|min_angle| {
-            found.iter().any(|(accepted, _)| {
-                accepted.normal.dot(&result.model.normal).abs() > min_angle.cos()
-            })
-        });
+        let too_parallel = options
+            .min_angle_between
+            .is_some_and(|min_angle| dependent(&found, &result.model, min_angle));
         if too_parallel {
             discarded += 1;
             if discarded > MAX_DISCARDED {
@@ -267,7 +284,7 @@ pub fn extract_planes(
             found.len(),
             options.count,
             if discarded > 0 {
-                format!(" ({discarded} more discarded as nearly parallel to those)")
+                format!(" ({discarded} more discarded as parallel to those or to their span)")
             } else {
                 String::new()
             }

@@ -187,7 +187,7 @@ CASES: list[Case] = [
             lambda: np.vstack([_plane(3000, [1, 0, 0], -3), _plane(3000, [1, 0, 0], 3, seed=1)])
         ),
         CE,
-        "discarded as nearly parallel",
+        "discarded as parallel",
     ),
     Case("planes: Gaussian blob", planes(_blob), CE, "no clearly planar surface"),
     Case(
