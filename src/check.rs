@@ -32,7 +32,9 @@
 //! * [`Verdict::Inconsistent`]: the correction exceeds the tolerance along some direction (the
 //!   larger of the fixed floor and three standard deviations where the overlap constrains the
 //!   pose well, a gross-error tolerance where it does not: ICP drifts there on sparse scenes), or
-//!   too many points violate the free space, or too few overlapping points agree.
+//!   the re-aligned pose fits clearly more points than the given one
+//!   ([`CheckOptions::max_agreement_gain`]), or too many points violate the free space, or too
+//!   few overlapping points agree.
 //! * [`Verdict::Consistent`]: none of these.
 //!
 //! ```
@@ -78,6 +80,8 @@ const THICKNESS_SAMPLES: usize = 1000;
 const THICKNESS_SCALE: f64 = 1.5;
 /// Largest noise scale (metres) the agreement test uses.
 const MAX_NOISE: f64 = 0.1;
+/// Default of [`CheckOptions::max_agreement_gain`].
+pub const MAX_AGREEMENT_GAIN: f64 = 0.08;
 
 /// The outcome of [`check`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -142,6 +146,12 @@ pub struct CheckOptions {
     /// Smallest share of the translation (and rotation) information in its weakest direction;
     /// below it the verdict is [`Verdict::Unverifiable`].
     pub min_information_share: f64,
+    /// Largest rise of the agreement (both ways, the smaller of the two) from the given pose to
+    /// the re-aligned one: a pose whose neighbour fits clearly more points is not where the
+    /// scene puts the sensor, whatever the size of the correction. On the real pairs the
+    /// references gain at most 4.8 points (a weaker reference of the hesai set); corners 11 cm /
+    /// 1.5 degrees off and poles 10-12 cm off gain 11-33 points.
+    pub max_agreement_gain: f64,
     /// Bin size of the range images of the free-space test (radians). A point is tested only
     /// where the other sensor has a return in its own bin: fine bins keep the test to directions
     /// a ray really took, so the edge of a box or a ring of grazing ground does not count.
@@ -164,6 +174,7 @@ impl Default for CheckOptions {
             weak_translation_tolerance: 0.5,
             strong_share: 0.05,
             min_information_share: 0.005,
+            max_agreement_gain: MAX_AGREEMENT_GAIN,
             visibility_resolution: 0.25f64.to_radians(),
         }
     }
@@ -174,21 +185,35 @@ impl CheckOptions {
     /// planes, two non-parallel poles): tolerances of 1 degree / 12 cm, since on the sparse scenes
     /// these methods serve the re-alignment itself wanders (from the exact pose of simulated
     /// 16-beam corners it moved up to 8 cm).
+    ///
+    /// At most 20 % of the points may violate the other's free space (25 % by default): correct
+    /// corner results of 1000 adversarial scenes put at most 9.4 % there, the RS-16 corner 0.8 %
+    /// and the planar seed's synthetic protocol (points scattered on the planes, occlusion
+    /// ignored) up to 17.4 %, while a corner whose ground was taken from a box top (1.2 m off)
+    /// put 24 %. The real road pairs, with traffic, reach 18 % at their references: the default
+    /// keeps 25 %.
     pub fn fitted() -> Self {
         CheckOptions {
             rotation_tolerance: 1f64.to_radians(),
             translation_tolerance: 0.12,
+            max_violations: 0.2,
             ..CheckOptions::default()
         }
     }
 
-    /// [`fitted`](Self::fitted) without the observability floor, for poles: a few hundred pole
-    /// points beside thousands of ground points hold well under 1 % of the rotation information
-    /// about the poles, which the pole fit itself constrains (non-parallel axes, axis RMS,
-    /// hypothesis margin).
+    /// [`fitted`](Self::fitted) without the observability floor and the agreement-gain test, and
+    /// with the default free-space bound, for poles: a few hundred pole points beside thousands of ground points hold well under 1 % of
+    /// the rotation information about the poles, which the pole fit itself constrains
+    /// (non-parallel axes, axis RMS, hypothesis margin); and from pole results 1-10 cm off (correct
+    /// ones) the re-alignment raised the agreement by 8-32 points in 1000 adversarial scenes,
+    /// as much as from the two 10-12 cm off it would have caught.
     pub fn poles() -> Self {
         CheckOptions {
             min_information_share: 0.0,
+            max_agreement_gain: 1.0,
+            // Correct pole results put up to 24 % there (a few hundred pole points beside a
+            // ground seen at grazing angles): the default bound.
+            max_violations: CheckOptions::default().max_violations,
             ..CheckOptions::fitted()
         }
     }
@@ -217,6 +242,7 @@ impl CheckOptions {
             ("min_overlap", self.min_overlap),
             ("min_agreement", self.min_agreement),
             ("max_violations", self.max_violations),
+            ("max_agreement_gain", self.max_agreement_gain),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(Error::InvalidInput(format!(
@@ -256,6 +282,9 @@ pub struct CheckReport {
     pub agreement: f64,
     /// The same for reference points on the target surface.
     pub reverse_agreement: f64,
+    /// How much the agreement rises from the given pose to [`aligned`](Self::aligned): the
+    /// smaller of the rises both ways (shares of the overlapping points; negative when it falls).
+    pub agreement_gain: f64,
     /// Share of target points that land in the reference sensor's free space, of those it could
     /// have seen.
     pub violations: f64,
@@ -482,6 +511,13 @@ pub fn check(
     };
     let agreement = agree(&res_t);
     let reverse_agreement = agree(&res_r);
+    // The agreement both ways at another pose (the re-aligned one, below).
+    let agreement_at = |pose: &Isometry3<f64>| {
+        let (_, forward) = residuals(&r.surface, &g.samples, pose, options.overlap_distance);
+        let inverse = pose.inverse();
+        let (_, backward) = residuals(&g.surface, &r.samples, &inverse, options.overlap_distance);
+        (agree(&forward), agree(&backward))
+    };
     res_t.retain(|r| *r <= limit);
     let rmse = if res_t.is_empty() {
         0.0
@@ -541,6 +577,10 @@ pub fn check(
         }
         None => (*t, 0.0, 0.0, (Vector3::x(), 0.0), (Vector3::x(), 0.0), None),
     };
+    let agreement_gain = icp.as_ref().map_or(0.0, |icp| {
+        let (forward, backward) = agreement_at(&icp.pose);
+        (forward - agreement).min(backward - reverse_agreement)
+    });
     // Tolerances: the floors, or three standard deviations of the aligned pose where larger.
     let (sd_t, sd_r) = covariance
         .map(|c| {
@@ -652,6 +692,19 @@ pub fn check(
                 options.weak_translation_tolerance * 100.0
             ),
         )
+    } else if agreement_gain > options.max_agreement_gain {
+        (
+            Verdict::Inconsistent,
+            Some(FailureKind::NoAgreement),
+            format!(
+                "a pose {:.2} deg / {:.1} cm away fits clearly more points: the agreement rises by \
+                 {:.1} points both ways (> {:.1})",
+                correction_rotation.to_degrees(),
+                correction_translation * 100.0,
+                pct(agreement_gain),
+                pct(options.max_agreement_gain)
+            ),
+        )
     } else if weakest_translation.1 < options.min_information_share {
         (
             Verdict::Unverifiable,
@@ -694,6 +747,7 @@ pub fn check(
         reverse_overlap,
         agreement,
         reverse_agreement,
+        agreement_gain,
         violations,
         reverse_violations,
         rmse,

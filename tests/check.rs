@@ -29,6 +29,45 @@ fn the_truth_is_consistent_and_gross_errors_are_not() {
 }
 
 #[test]
+fn a_pose_whose_neighbour_fits_more_points_is_flagged_by_its_agreement_gain() {
+    let scene = street_scene(&StreetOptions::default()).unwrap();
+    let (reference, target) = (scene.reference.positions(), scene.target.positions());
+    let truth = scene.reference_from_target;
+    let options = CheckOptions::default();
+    let at_truth = check(&reference, &target, &truth, &options).unwrap();
+    assert!(
+        at_truth.agreement_gain.abs() < 0.02,
+        "{}",
+        at_truth.agreement_gain
+    );
+    // 12 cm up: the ground of one scan floats above the other's; the re-alignment puts it back
+    // and agrees on many more points.
+    let raised = Translation3::new(0.0, 0.0, 0.12) * truth;
+    let report = check(&reference, &target, &raised, &options).unwrap();
+    assert!(report.agreement_gain > 0.1, "{report}");
+    // With the gain test alone (every other test switched off) the pose is still flagged.
+    let gain_only = CheckOptions {
+        rotation_tolerance: 1.0,
+        translation_tolerance: 10.0,
+        weak_rotation_tolerance: 1.0,
+        weak_translation_tolerance: 10.0,
+        ..options
+    };
+    let report = check(&reference, &target, &raised, &gain_only).unwrap();
+    assert_eq!(report.verdict, Verdict::Inconsistent, "{report}");
+    assert!(
+        report.reason.contains("fits clearly more points"),
+        "{report}"
+    );
+    let relaxed = CheckOptions {
+        max_agreement_gain: 1.0,
+        ..gain_only
+    };
+    let report = check(&reference, &target, &raised, &relaxed).unwrap();
+    assert_eq!(report.verdict, Verdict::Consistent, "{report}");
+}
+
+#[test]
 fn a_corridor_is_unverifiable_and_certify_says_unobservable() {
     let scene = corridor_scene(0).unwrap();
     let (reference, target) = (scene.reference.positions(), scene.target.positions());

@@ -55,6 +55,11 @@ impl CheckReport {
     fn reverse_agreement(&self) -> f64 {
         self.inner.reverse_agreement
     }
+    /// Rise of the agreement (the smaller of both ways) from the given pose to `aligned`.
+    #[getter]
+    fn agreement_gain(&self) -> f64 {
+        self.inner.agreement_gain
+    }
     /// Share of target points in the reference sensor's free space (of those it could see).
     #[getter]
     fn violations(&self) -> f64 {
@@ -139,6 +144,7 @@ impl CheckReport {
         d.set_item("reverse_overlap", r.reverse_overlap)?;
         d.set_item("agreement", r.agreement)?;
         d.set_item("reverse_agreement", r.reverse_agreement)?;
+        d.set_item("agreement_gain", r.agreement_gain)?;
         d.set_item("violations", r.violations)?;
         d.set_item("reverse_violations", r.reverse_violations)?;
         d.set_item("rmse", r.rmse)?;
