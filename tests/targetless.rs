@@ -43,8 +43,9 @@ fn street(seed: u64, side: Side) -> (f64, f64) {
 #[test]
 fn tilted_side_units_on_a_street_without_initial_guess() {
     // Seeds whose street the method solves (see the module docs' limits for the others: a
-    // symmetric street can verify the 180-degree turn as well as the truth).
-    for (seed, side) in [(0, Side::Left), (3, Side::Right)] {
+    // symmetric street can verify the 180-degree turn as well as the truth; street 3 fits a pose
+    // beyond max_translation as well as the truth and is refused by default).
+    for (seed, side) in [(0, Side::Left), (2, Side::Right)] {
         let (angle, distance) = street(seed, side);
         assert!(
             angle.to_degrees() < 0.1 && distance < 0.02,
@@ -52,6 +53,47 @@ fn tilted_side_units_on_a_street_without_initial_guess() {
             angle.to_degrees()
         );
     }
+}
+
+#[test]
+fn sensors_further_apart_than_max_translation_are_refused_not_replaced() {
+    // The unit sits ~3 m back; with max_translation 2 m the truth is out of bounds. It is verified
+    // as a challenger (up to 4 m) and fits best: refused as out of range (or ambiguous), never
+    // answered with the best pose within 2 m.
+    let scene = street_scene(&StreetOptions {
+        seed: 0,
+        side: Side::Left,
+        target_offset: -3.0,
+        ..StreetOptions::default()
+    })
+    .unwrap();
+    let (reference, target) = (scene.reference.positions(), scene.target.positions());
+    let bounded = TargetlessOptions {
+        max_translation: 2.0,
+        ..TargetlessOptions::default()
+    };
+    let err = calibrate_targetless(&reference, &target, &bounded).unwrap_err();
+    assert!(
+        matches!(
+            err.kind(),
+            Some(lidarcal::FailureKind::OutOfRange | lidarcal::FailureKind::Ambiguous)
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("max_translation"), "{err}");
+    // Within the default bound it is solved.
+    let r = calibrate_targetless(&reference, &target, &TargetlessOptions::default()).unwrap();
+    let (angle, distance) = pose_error(&scene.reference_from_target, &r.reference_from_target);
+    assert!(angle.to_degrees() < 0.1 && distance < 0.02);
+    // A challenger range below 1 is an input error.
+    let bad = TargetlessOptions {
+        challenger_range: 0.5,
+        ..TargetlessOptions::default()
+    };
+    assert!(matches!(
+        calibrate_targetless(&reference, &target, &bad),
+        Err(Error::InvalidInput(_))
+    ));
 }
 
 #[test]

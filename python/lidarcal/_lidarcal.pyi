@@ -53,6 +53,8 @@ class CheckReport:
     @property
     def reverse_agreement(self) -> float: ...
     @property
+    def agreement_gain(self) -> float: ...
+    @property
     def violations(self) -> float: ...
     @property
     def reverse_violations(self) -> float: ...
@@ -258,6 +260,7 @@ def calibrate_targetless(
     voxel_size: float = 0.1,
     max_planes: int = 10,
     max_translation: float = 5.0,
+    challenger_range: float = 2.0,
     icp: bool = True,
     min_information_share: float = 0.01,
     ground_sweep: bool = True,

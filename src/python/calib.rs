@@ -707,8 +707,11 @@ fn calibrate_poles(
 ///
 /// reference, target: (N, 3) or (N, 4) clouds in their sensors' frames.
 /// distance_threshold: plane inlier distance (m); None estimates it per cloud.
-/// voxel_size: downsampling voxel (m). max_planes: planes per cloud. max_translation: hypotheses
-///     moving the target further (m) are dropped (sensors of one rig are close). icp: run the final
+/// voxel_size: downsampling voxel (m). max_planes: planes per cloud. max_translation: the largest
+///     distance between the sensors (m); no pose beyond it is returned. challenger_range: poses up
+///     to this multiple of max_translation are verified too, and when one fits as well as or
+///     better than the best within range the calibration is refused (ambiguous / out_of_range)
+///     rather than answered with the best pose within range; 1.0 trusts the bound. icp: run the final
 ///     ICP. min_information_share: the weakest direction's share of the information below which
 ///     the calibration is refused as unobservable. ground_sweep: also hypothesise from the
 ///     largest plane of each cloud turned about its normal (no common plane pair needed).
@@ -717,7 +720,7 @@ fn calibrate_poles(
 /// Raises CalibrationError naming why (too few planes, nothing verifies, an unconstrained
 /// direction such as the axis of a corridor).
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=0.1, max_planes=10, max_translation=5.0, icp=true, min_information_share=0.01, ground_sweep=true, refuse_ambiguous=true, seed=0))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=0.1, max_planes=10, max_translation=5.0, challenger_range=2.0, icp=true, min_information_share=0.01, ground_sweep=true, refuse_ambiguous=true, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_targetless(
     py: Python<'_>,
@@ -727,6 +730,7 @@ fn calibrate_targetless(
     voxel_size: f64,
     max_planes: usize,
     max_translation: f64,
+    challenger_range: f64,
     icp: bool,
     min_information_share: f64,
     ground_sweep: bool,
@@ -736,6 +740,7 @@ fn calibrate_targetless(
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;
     let options = TargetlessOptions {
+        challenger_range,
         ground_sweep,
         refuse_ambiguous,
         distance_threshold,

@@ -180,12 +180,6 @@ def test_cli_prints_the_kind_of_a_refusal(tmp_path: Path) -> None:
     assert entry["kind"] in KINDS and entry["error"]
 
 
-#: The hard case the certification does not catch yet (issue 15 open): a pose 10 m off for sensors
-#: 7.4 m apart, agreeing with more of the scene than the truth (whose overlap is small) and
-#: consistent to every local test. Strict: once it is refused or solved the mark must go.
-STILL_WRONG = {"partial_28_targetless.npz"}
-
-
 HARD_CASES = [
     "corners_11_auto.npz",
     "partial_28_targetless.npz",
@@ -195,12 +189,7 @@ HARD_CASES = [
 ]
 
 
-def _hard_cases() -> list[object]:
-    known = pytest.mark.xfail(strict=True, reason="known wrong answer (issue 15)")
-    return [pytest.param(n, marks=[known] if n in STILL_WRONG else []) for n in HARD_CASES]
-
-
-@pytest.mark.parametrize("name", _hard_cases())
+@pytest.mark.parametrize("name", HARD_CASES)
 def test_hard_case_is_refused_with_a_kind_or_solved(name: str) -> None:
     hard = require("hard_cases")
     meta = json.loads((hard / "README.json").read_text())[name]
@@ -219,3 +208,15 @@ def test_hard_case_is_refused_with_a_kind_or_solved(name: str) -> None:
     error = np.linalg.inv(z["reference_from_target"]) @ result.transform
     angle = np.arccos(np.clip((np.trace(error[:3, :3]) - 1) / 2, -1, 1))
     assert angle <= 0.05 and np.linalg.norm(error[:3, 3]) <= 0.10, (name, angle, error[:3, 3])
+
+
+def test_sensors_further_apart_than_max_translation_are_refused_not_replaced() -> None:
+    # partial_28: sensors 7.4 m apart, beyond the default max_translation of 5 m. The best pose
+    # within 5 m (a quarter turn, 10 m off) used to come back; the true pose, verified as a
+    # challenger beyond the bound, now scores as well and the result is refused.
+    hard = require("hard_cases")
+    z = np.load(hard / "partial_28_targetless.npz")
+    with pytest.raises(lidarcal.CalibrationError) as info:
+        lidarcal.calibrate_targetless(z["reference"], z["target"])
+    assert info.value.kind in ("ambiguous", "out_of_range")
+    assert "max_translation" in str(info.value)
