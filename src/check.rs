@@ -70,6 +70,9 @@ const MIN_OVERLAP_POINTS: usize = 100;
 const MIN_NOISE: f64 = 0.01;
 /// Correspondence distance the re-alignment starts from (metres).
 const REALIGN_START: f64 = 0.3;
+/// The re-alignment stops once a step at its final gate moves less than this (tangent norm: 1 mm
+/// and 0.06 degrees together), two orders below the tolerances it is judged by.
+const REALIGN_STEP_TOLERANCE: f64 = 1e-3;
 /// The re-alignment pairs points only when their normals are within this of parallel (30 deg).
 const MAX_NORMAL_ANGLE: f64 = std::f64::consts::PI / 6.0;
 /// Points per cloud whose local thickness gives the noise scale.
@@ -542,6 +545,7 @@ pub fn check(
         // it stayed). Real clouds (2-3 cm thick surfaces) end near 20 cm.
         min_distance: (8.0 * noise).max(options.voxel_size),
         samples: options.samples,
+        step_tolerance: REALIGN_STEP_TOLERANCE,
         ..IcpOptions::default()
     };
     // Too few correspondences is a finding (unverifiable); anything else is an error.
