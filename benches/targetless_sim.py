@@ -2,7 +2,7 @@
 refuses, or gets wrong, and the worst error of the ones it accepts.
 
 Run from the repository root after installing the wheel:
-    python benches/targetless_sim.py [--seeds 8]
+    python benches/targetless_sim.py [--seeds 8] [--challenger-range 2.0]
 
 Every street seed (left and right side unit) is calibrated with the side unit moved along the
 vehicle by each offset (0 = beside the roof unit, -3 = at the back of a car), once with the
@@ -34,12 +34,19 @@ def errors(truth: np.ndarray, est: np.ndarray) -> tuple[float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=8)
+    parser.add_argument(
+        "--challenger-range",
+        type=float,
+        default=2.0,
+        help="calibrate_targetless's challenger_range (1.0 trusts max_translation)",
+    )
     args = parser.parse_args()
     print(
         "| planes per cloud | offset (m) | solved | refused | wrong | worst accepted "
         "| median time |"
     )
     print("|---|---|---|---|---|---|---|")
+    totals = [0, 0, 0]
     for max_planes in (10, 2):
         for offset in OFFSETS:
             solved = refused = 0
@@ -52,7 +59,10 @@ def main() -> None:
                     t0 = time.perf_counter()
                     try:
                         r = lidarcal.calibrate_targetless(
-                            scene.reference, scene.target, max_planes=max_planes
+                            scene.reference,
+                            scene.target,
+                            max_planes=max_planes,
+                            challenger_range=args.challenger_range,
                         )
                     except lidarcal.CalibrationError:
                         refused += 1
@@ -65,11 +75,13 @@ def main() -> None:
                         worst = (max(worst[0], a), max(worst[1], t))
                     else:
                         wrong.append(f"{seed}/{side}: {a:.2f} deg {t:.2f} m")
+            totals = [totals[0] + solved, totals[1] + refused, totals[2] + len(wrong)]
             print(
                 f"| {max_planes} | {offset:+.0f} | {solved} | {refused} | {len(wrong)} "
                 f"{'(' + '; '.join(wrong) + ')' if wrong else ''}| "
                 f"{worst[0]:.3f} deg / {1000 * worst[1]:.1f} mm | {np.median(times):.2f} s |"
             )
+    print(f"\nAll: {totals[0]} solved, {totals[1]} refused, {totals[2]} wrong")
 
 
 if __name__ == "__main__":
