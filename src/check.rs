@@ -29,9 +29,10 @@
 //! # Verdict
 //! * [`Verdict::Unverifiable`]: too few points in the overlap, or a direction the overlap does
 //!   not constrain (nothing there could reveal an error along it).
-//! * [`Verdict::Inconsistent`]: the correction exceeds the tolerance along some direction (the
-//!   larger of the fixed floor and three standard deviations where the overlap constrains the
-//!   pose well, a gross-error tolerance where it does not: ICP drifts there on sparse scenes), or
+//! * [`Verdict::Inconsistent`]: the part of the correction in the directions the overlap
+//!   constrains well exceeds the fine tolerance (the larger of the fixed floor and three standard
+//!   deviations), or its part in the others exceeds a gross-error tolerance (ICP drifts there on
+//!   sparse scenes), or
 //!   the re-aligned pose fits clearly more points than the given one
 //!   ([`CheckOptions::max_agreement_gain`]), or too many points violate the free space, or too
 //!   few overlapping points agree.
@@ -425,9 +426,11 @@ fn violation_share(
     violations as f64 / tested.max(1) as f64
 }
 
-/// The largest ratio of `correction`'s component along an eigen-direction of the information
-/// `block` to that direction's tolerance: `fine` where the direction holds at least
-/// `strong_share` of the trace, `weak` elsewhere.
+/// How far `correction` exceeds its tolerance, as a ratio: its part in the subspace of the
+/// eigen-directions of the information `block` holding at least `strong_share` of the trace,
+/// against `fine`, and its part in the others against `weak`; the larger of the two. The parts
+/// are whole vectors, not components one by one: a 9 cm correction spread over three well
+/// constrained directions is 9 cm, not three times 5.2 cm under a 6 cm tolerance.
 fn excess(
     block: &Matrix3<f64>,
     correction: &Vector3<f64>,
@@ -437,17 +440,21 @@ fn excess(
 ) -> f64 {
     let eig = SymmetricEigen::new(*block);
     let trace = block.trace();
-    (0..3)
-        .map(|i| {
-            let share = if trace > 0.0 {
-                eig.eigenvalues[i] / trace
-            } else {
-                0.0
-            };
-            let tolerance = if share >= strong_share { fine } else { weak };
-            eig.eigenvectors.column(i).dot(correction).abs() / tolerance
-        })
-        .fold(0.0, f64::max)
+    let (mut strong, mut loose) = (0.0, 0.0);
+    for i in 0..3 {
+        let share = if trace > 0.0 {
+            eig.eigenvalues[i] / trace
+        } else {
+            0.0
+        };
+        let part = eig.eigenvectors.column(i).dot(correction).powi(2);
+        if share >= strong_share {
+            strong += part;
+        } else {
+            loose += part;
+        }
+    }
+    (strong.sqrt() / fine).max(loose.sqrt() / weak)
 }
 
 /// The median of `values` (0 for none).
@@ -605,7 +612,7 @@ pub fn check(
         .unwrap_or((f64::INFINITY, f64::INFINITY));
     let detectable_rotation = options.rotation_tolerance.max(3.0 * sd_r);
     let detectable_translation = options.translation_tolerance.max(3.0 * sd_t);
-    // The correction against its tolerance, direction by direction: fine along what the overlap
+    // The correction against its tolerance, subspace by subspace: fine along what the overlap
     // constrains well, weak (a gross error only) along the rest.
     let excess = icp.as_ref().map_or(0.0, |icp| {
         let delta = se3_log(&(icp.pose * inverse));
@@ -788,5 +795,25 @@ pub fn certify(
                 report.verdict, report.reason
             ),
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn excess_takes_the_correction_in_each_subspace_as_a_whole() {
+        // Isotropic information: every direction is well constrained. A 9 cm correction split
+        // evenly over the three axes (5.2 cm each) exceeds a 6 cm tolerance.
+        let iso = Matrix3::identity();
+        let spread = Vector3::new(1.0, 1.0, 1.0).normalize() * 0.09;
+        assert!(excess(&iso, &spread, 0.06, 0.5, 0.05) > 1.4);
+        assert!(excess(&iso, &(spread * 0.5), 0.06, 0.5, 0.05) < 1.0);
+        // A direction holding 1 % of the information only counts against the weak tolerance.
+        let weak_z = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.02));
+        assert!(excess(&weak_z, &Vector3::new(0.0, 0.0, 0.4), 0.06, 0.5, 0.05) < 1.0);
+        assert!(excess(&weak_z, &Vector3::new(0.0, 0.0, 0.6), 0.06, 0.5, 0.05) > 1.0);
+        assert!(excess(&weak_z, &Vector3::new(0.05, 0.05, 0.0), 0.06, 0.5, 0.05) > 1.0);
     }
 }
