@@ -379,12 +379,18 @@ impl Side {
     }
 
     fn new(points: &[Point3<f64>], options: &CheckOptions) -> Result<Self> {
-        let (voxels, _) = voxel_downsample(points, options.voxel_size)?;
-        let stride = voxels.len().div_ceil(options.samples).max(1);
-        let samples = voxels.iter().step_by(stride).copied().collect();
-        let image = RangeImage::new(points, options.visibility_resolution)?;
+        let (indexed, image) = crate::join(
+            || -> Result<_> {
+                let (voxels, _) = voxel_downsample(points, options.voxel_size)?;
+                let stride = voxels.len().div_ceil(options.samples).max(1);
+                let samples = voxels.iter().step_by(stride).copied().collect();
+                Ok((SurfaceCloud::new(voxels)?, samples))
+            },
+            || RangeImage::new(points, options.visibility_resolution),
+        );
+        let ((surface, samples), image) = (indexed?, image?);
         Ok(Side {
-            surface: SurfaceCloud::new(voxels)?,
+            surface,
             samples,
             image,
         })
@@ -490,25 +496,24 @@ pub fn check(
             "the transform has non-finite entries".into(),
         ));
     }
-    #[cfg(feature = "parallel")]
-    let (r, g) = rayon::join(
+    let (r, g) = crate::join(
         || Side::new(reference, options),
         || Side::new(target, options),
     );
-    #[cfg(not(feature = "parallel"))]
-    let (r, g) = (Side::new(reference, options), Side::new(target, options));
     let (r, g) = (r?, g?);
 
     // Agreement both ways at the given pose.
-    let (overlap_t, mut res_t) = residuals(&r.surface, &g.samples, t, options.overlap_distance);
     let inverse = t.inverse();
-    let (overlap_r, res_r) = residuals(&g.surface, &r.samples, &inverse, options.overlap_distance);
+    let ((overlap_t, mut res_t), (overlap_r, res_r)) = crate::join(
+        || residuals(&r.surface, &g.samples, t, options.overlap_distance),
+        || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
+    );
     let (normals_t, normals_r) = (res_t.len(), res_r.len());
     // The noise scale comes from each cloud alone (how thick its surfaces are), never from the
     // residuals under the pose being checked: a pose 10 cm off would otherwise measure a 10 cm
     // noise and agree with itself.
     let noise = options.noise.unwrap_or_else(|| {
-        let (a, b) = (r.thickness(), g.thickness());
+        let (a, b) = crate::join(|| r.thickness(), || g.thickness());
         (THICKNESS_SCALE * (a * a + b * b).sqrt()).clamp(MIN_NOISE, MAX_NOISE)
     });
     let limit = 3.0 * noise;
@@ -523,9 +528,11 @@ pub fn check(
     let reverse_agreement = agree(&res_r);
     // The agreement both ways at another pose (the re-aligned one, below).
     let agreement_at = |pose: &Isometry3<f64>| {
-        let (_, forward) = residuals(&r.surface, &g.samples, pose, options.overlap_distance);
         let inverse = pose.inverse();
-        let (_, backward) = residuals(&g.surface, &r.samples, &inverse, options.overlap_distance);
+        let ((_, forward), (_, backward)) = crate::join(
+            || residuals(&r.surface, &g.samples, pose, options.overlap_distance),
+            || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
+        );
         (agree(&forward), agree(&backward))
     };
     res_t.retain(|r| *r <= limit);

@@ -100,6 +100,25 @@ mod python;
 
 pub use error::{Error, FailureKind, Result};
 
+/// Runs `a` and `b` side by side on rayon's pool (feature `parallel`), one after the other
+/// without it; the results do not depend on which.
+pub(crate) fn join<A, B, RA, RB>(a: A, b: B) -> (RA, RB)
+where
+    A: FnOnce() -> RA + Send,
+    B: FnOnce() -> RB + Send,
+    RA: Send,
+    RB: Send,
+{
+    #[cfg(feature = "parallel")]
+    {
+        rayon::join(a, b)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        (a(), b())
+    }
+}
+
 /// The README's Rust examples, compiled and run as doctests so they cannot rot.
 #[doc = include_str!("../README.md")]
 #[cfg(doctest)]

@@ -542,15 +542,9 @@ pub fn calibrate_planes(
         let planes = extract_planes(points, &o).map_err(|e| with_cloud(e, which))?;
         Ok((threshold, right_handed(planes)))
     };
-    #[cfg(feature = "parallel")]
-    let (ref_result, tgt_result) = rayon::join(
+    let (ref_result, tgt_result) = crate::join(
         || per_cloud(reference, "reference"),
         || per_cloud(target, "target"),
-    );
-    #[cfg(not(feature = "parallel"))]
-    let (ref_result, tgt_result) = (
-        per_cloud(reference, "reference"),
-        per_cloud(target, "target"),
     );
     let (threshold_ref, found_ref) = ref_result?;
     let (threshold_tgt, found_tgt) = tgt_result?;

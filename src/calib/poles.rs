@@ -943,15 +943,9 @@ pub fn calibrate_poles(
         let plane = largest_plane(&dull, points.len(), options.seed);
         check_poles(&extraction, which).map(|_| (extraction, plane))
     };
-    #[cfg(feature = "parallel")]
-    let (ref_result, tgt_result) = rayon::join(
+    let (ref_result, tgt_result) = crate::join(
         || per_cloud(reference, reference_intensities, "reference"),
         || per_cloud(target, target_intensities, "target"),
-    );
-    #[cfg(not(feature = "parallel"))]
-    let (ref_result, tgt_result) = (
-        per_cloud(reference, reference_intensities, "reference"),
-        per_cloud(target, target_intensities, "target"),
     );
     let (ext_ref, ground_ref) = ref_result?;
     let (ext_tgt, ground_tgt) = tgt_result?;

@@ -1135,11 +1135,8 @@ pub fn calibrate_targetless(
     check_cloud(target, "target")?;
     let mut clock = Stopwatch::start();
 
-    #[cfg(feature = "parallel")]
     let (ref_result, tgt_result) =
-        rayon::join(|| prepare(reference, options), || prepare(target, options));
-    #[cfg(not(feature = "parallel"))]
-    let (ref_result, tgt_result) = (prepare(reference, options), prepare(target, options));
+        crate::join(|| prepare(reference, options), || prepare(target, options));
     let (reference_ds, target_ds) = (ref_result?, tgt_result?);
     clock.lap("planes");
     for (prepared, which) in [(&reference_ds, "reference"), (&target_ds, "target")] {
