@@ -768,7 +768,8 @@ def check_command(
         )
         click.echo(
             f"  correction {report.correction_rotation_deg:.3f} deg / "
-            f"{100 * report.correction_translation_m:.1f} cm; detects "
+            f"{100 * report.correction_translation_m:.1f} cm (agreement "
+            f"{100 * report.agreement_gain:+.1f} points there); detects "
             f"{report.detectable_rotation_deg:.2f} deg / "
             f"{100 * report.detectable_translation_m:.1f} cm"
         )

@@ -156,9 +156,11 @@ def test_cli_check_exit_codes(tmp_path: Path, street: sim.Scene) -> None:
     ok = runner.invoke(main, ["check", str(ref), str(tgt), "--transform", str(good)])
     assert ok.exit_code == 0, ok.output
     assert "consistent" in ok.output
+    assert "points there" in ok.output  # the agreement gain at the re-aligned pose
     off = runner.invoke(main, ["check", str(ref), str(tgt), "--transform", str(bad), "--json"])
     assert off.exit_code == 2, off.output
     assert json.loads(off.output)["verdict"] == "inconsistent"
+    assert "agreement_gain" in json.loads(off.output)
     far = tmp_path / "far.txt"
     moved = street.reference_from_target.copy()
     moved[0, 3] += 500.0
