@@ -33,8 +33,7 @@
 //! * [`Verdict::Inconsistent`]: the part of the correction in the directions the overlap
 //!   constrains well exceeds the fine tolerance (the larger of the fixed floor and three standard
 //!   deviations), or its part in the others exceeds a gross-error tolerance (ICP drifts there on
-//!   sparse scenes), or
-//!   the re-aligned pose fits clearly more points than the given one
+//!   sparse scenes), or the re-aligned pose fits clearly more points than the given one
 //!   ([`CheckOptions::max_agreement_gain`]), or too many points violate the free space, or too
 //!   few overlapping points agree.
 //! * [`Verdict::Consistent`]: none of these.
@@ -207,11 +206,12 @@ impl CheckOptions {
     }
 
     /// [`fitted`](Self::fitted) without the observability floor and the agreement-gain test, and
-    /// with the default free-space bound, for poles: a few hundred pole points beside thousands of ground points hold well under 1 % of
-    /// the rotation information about the poles, which the pole fit itself constrains
-    /// (non-parallel axes, axis RMS, hypothesis margin); and from pole results 1-10 cm off (correct
-    /// ones) the re-alignment raised the agreement by 8-32 points in 1000 adversarial scenes,
-    /// as much as from the two 10-12 cm off it would have caught.
+    /// with the default free-space bound, for poles: a few hundred pole points beside thousands
+    /// of ground points hold well under 1 % of the rotation information about the poles, which
+    /// the pole fit itself constrains (non-parallel axes, axis RMS, hypothesis margin); and from
+    /// pole results 1-10 cm off (correct ones) the re-alignment raised the agreement by 8-32
+    /// points in 1000 adversarial scenes, as much as from the two 10-12 cm off it would have
+    /// caught.
     pub fn poles() -> Self {
         CheckOptions {
             min_information_share: 0.0,
@@ -503,12 +503,18 @@ pub fn check(
     );
     let (r, g) = (r?, g?);
 
+    // Residuals both ways at a pose: target samples on the reference surface, reference samples
+    // on the target surface.
+    let both_ways = |pose: &Isometry3<f64>| {
+        let inverse = pose.inverse();
+        crate::join(
+            || residuals(&r.surface, &g.samples, pose, options.overlap_distance),
+            || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
+        )
+    };
     // Agreement both ways at the given pose.
     let inverse = t.inverse();
-    let ((overlap_t, mut res_t), (overlap_r, res_r)) = crate::join(
-        || residuals(&r.surface, &g.samples, t, options.overlap_distance),
-        || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
-    );
+    let ((overlap_t, mut res_t), (overlap_r, res_r)) = both_ways(t);
     let (normals_t, normals_r) = (res_t.len(), res_r.len());
     // The noise scale comes from each cloud alone (how thick its surfaces are), never from the
     // residuals under the pose being checked: a pose 10 cm off would otherwise measure a 10 cm
@@ -527,15 +533,6 @@ pub fn check(
     };
     let agreement = agree(&res_t);
     let reverse_agreement = agree(&res_r);
-    // The agreement both ways at another pose (the re-aligned one, below).
-    let agreement_at = |pose: &Isometry3<f64>| {
-        let inverse = pose.inverse();
-        let ((_, forward), (_, backward)) = crate::join(
-            || residuals(&r.surface, &g.samples, pose, options.overlap_distance),
-            || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
-        );
-        (agree(&forward), agree(&backward))
-    };
     res_t.retain(|r| *r <= limit);
     let rmse = if res_t.is_empty() {
         0.0
@@ -597,8 +594,8 @@ pub fn check(
         None => (*t, 0.0, 0.0, (Vector3::x(), 0.0), (Vector3::x(), 0.0), None),
     };
     let agreement_gain = icp.as_ref().map_or(0.0, |icp| {
-        let (forward, backward) = agreement_at(&icp.pose);
-        (forward - agreement).min(backward - reverse_agreement)
+        let ((_, forward), (_, backward)) = both_ways(&icp.pose);
+        (agree(&forward) - agreement).min(agree(&backward) - reverse_agreement)
     });
     // Tolerances: the floors, or three standard deviations of the aligned pose where larger.
     let (sd_t, sd_r) = covariance

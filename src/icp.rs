@@ -239,7 +239,7 @@ impl SurfaceCloud {
         }
         let near = points
             .iter()
-            .filter(|p| self.nearest(&(pose * *p), distance).is_some())
+            .filter(|p| self.any_within(&(pose * *p), distance))
             .count();
         near as f64 / points.len() as f64
     }
@@ -459,12 +459,11 @@ pub fn point_to_plane_icp_with_normals(
     let reach = 2.0 * options.max_distance;
     let samples: Vec<Sample> = (0..points.len())
         .step_by(stride)
-        .filter(|&i| {
-            points
-                .get(i)
-                .is_some_and(|p| reference.any_within(&(initial * p), reach))
+        .filter_map(|i| {
+            let p = *points.get(i)?;
+            reference.any_within(&(initial * p), reach).then_some(())?;
+            Some((p, Some(target.normal(i)?)))
         })
-        .filter_map(|i| Some((*points.get(i)?, Some(target.normal(i)?))))
         .collect();
     icp_on_samples(
         reference,

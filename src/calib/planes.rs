@@ -350,15 +350,8 @@ fn check_widths(
     which: &str,
 ) -> Result<()> {
     for (k, plane) in found.iter().enumerate() {
-        let moments = Moments::from_points(
-            &plane
-                .inliers
-                .iter()
-                .filter_map(|&i| points.get(i).copied())
-                .collect::<Vec<_>>(),
-        );
-        let (values, _) = moments.principal_axes();
-        let width = (12.0 * values[1] / moments.weight().max(1.0)).sqrt();
+        let [_, width] =
+            Moments::from_points(plane.inliers.iter().filter_map(|&i| points.get(i))).extents();
         if width < min_width {
             return Err(Error::calibration(
                 FailureKind::TooFewFeatures,

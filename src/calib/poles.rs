@@ -1104,7 +1104,7 @@ pub fn calibrate_poles(
     let pole_rmse = per_pole_rms(&clouds, &best.matches, options.loss, &pose)?;
     // A centroid line sits up to a radius in front of the axis and estimates no radius: its
     // residuals include the pole's thickness, allowed up to LINE_FIT_THICKNESS.
-    let allowed = |_: usize| match options.axis_fit {
+    let allowed = match options.axis_fit {
         AxisFit::Cylinder => MAX_POLE_RMSE,
         AxisFit::Line => MAX_POLE_RMSE + LINE_FIT_THICKNESS,
     };
@@ -1112,7 +1112,7 @@ pub fn calibrate_poles(
         .iter()
         .copied()
         .enumerate()
-        .find(|&(k, r)| !(r.is_finite() && r <= allowed(k)))
+        .find(|&(_, r)| !(r.is_finite() && r <= allowed))
     {
         return Err(Error::calibration(
             FailureKind::OutOfRange,
@@ -1120,7 +1120,7 @@ pub fn calibrate_poles(
                 "pole {k} lies {worst:.3} m (RMS) from its matched axis at the best pose (> \
                  {:.3} m; correct matches stay under 1 cm): the poles found in the two \
                  clouds are not the same poles, or one is barely seen",
-                allowed(k)
+                allowed
             ),
         ));
     }

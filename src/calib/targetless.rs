@@ -605,11 +605,7 @@ fn distinct(mut features: Vec<PlaneFeature>, max_planes: usize) -> Vec<PlaneFeat
 /// A plane feature from inlier indices, if it is at least [`MIN_PLANE_WIDTH`] wide.
 fn feature(points: &[Point3<f64>], plane: Plane, voxels: Vec<usize>) -> Option<PlaneFeature> {
     let m = Moments::from_points(voxels.iter().filter_map(|&i| points.get(i)));
-    let (values, _) = m.principal_axes();
-    let extent = [
-        (12.0 * values[2] / m.weight().max(1.0)).sqrt(),
-        (12.0 * values[1] / m.weight().max(1.0)).sqrt(),
-    ];
+    let extent = m.extents();
     (extent[1] >= MIN_PLANE_WIDTH).then(|| PlaneFeature {
         plane,
         voxels,
@@ -1225,7 +1221,9 @@ pub fn calibrate_targetless(
             .map(|r| score(r.pose, samples))
     };
     // The best supported hypotheses within range, and half as many challengers beyond it.
-    let in_range = |c: &Candidate| c.pose.translation.vector.norm() <= options.max_translation;
+    let in_bound =
+        |pose: &Isometry3<f64>| pose.translation.vector.norm() <= options.max_translation;
+    let in_range = |c: &Candidate| in_bound(&c.pose);
     let paired: Vec<Candidate> = candidates
         .iter()
         .filter(|c| in_range(c))
@@ -1309,7 +1307,7 @@ pub fn calibrate_targetless(
     // A challenger beyond max_translation competes only when it comes close to the best: the
     // user's bound on the rig already rules such poses out, and a corner turned by half a turn
     // 6-9 m away scores 75-90 % of the truth.
-    let within = |v: &Verified| v.pose.translation.vector.norm() <= options.max_translation;
+    let within = |v: &Verified| in_bound(&v.pose);
     let ratio = |v: &Verified| {
         if within(v) {
             AMBIGUITY_RATIO
@@ -1372,7 +1370,7 @@ pub fn calibrate_targetless(
     }
     let distance = polished.translation.vector.norm();
     if distance > options.max_translation {
-        let within = runner_up
+        let best_within = runner_up
             .filter(within)
             .map_or(f64::NEG_INFINITY, |r| r.score);
         // A challenger that fails the check itself says only that nothing fits (a cloud with
@@ -1390,8 +1388,8 @@ pub fn calibrate_targetless(
                  max_translation ({:.2} m; score {best_score:.3}, best within range {}): the \
                  sensors seem further apart than allowed; raise max_translation if they are",
                 options.max_translation,
-                if within.is_finite() {
-                    format!("{within:.3}")
+                if best_within.is_finite() {
+                    format!("{best_within:.3}")
                 } else {
                     "none".to_string()
                 }

@@ -114,6 +114,15 @@ impl Moments {
         (values, vectors)
     }
 
+    /// The extent of the points along their two largest principal axes (metres, larger first):
+    /// `sqrt(12 l / w)` of the scatter eigenvalues, the sides of a uniform rectangle with that
+    /// spread.
+    pub fn extents(&self) -> [f64; 2] {
+        let (values, _) = self.principal_axes();
+        let side = |l: f64| (12.0 * l / self.weight.max(1.0)).sqrt();
+        [side(values[2]), side(values[1])]
+    }
+
     /// The total-least-squares plane. Needs at least 3 points that are not collinear.
     pub fn plane(&self) -> Result<PlaneFit> {
         if self.count < 3 {
