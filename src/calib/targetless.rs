@@ -1431,7 +1431,16 @@ pub fn calibrate_targetless(
         ));
     }
     let second_score = runner_up.map_or(0.0, |r| r.score.max(0.0));
-    let ambiguous = runner_up.is_some_and(|r| r.score >= ratio(&r) * best_score);
+    // The agreement is a share of the sampled target points: two poses whose scores differ by
+    // less than one standard error of that share are not told apart by the verification,
+    // whatever the ratio of their scores (near zero, where free-space violations eat the
+    // agreement, the ratio says nothing: two identical boxes swapped scored 0.086 and 0.077).
+    let resolution = {
+        let (a, n) = (top.agreement.clamp(0.0, 1.0), full[0].len().max(1) as f64);
+        (a * (1.0 - a) / n).sqrt()
+    };
+    let ambiguous = runner_up
+        .is_some_and(|r| r.score >= ratio(&r) * best_score || best_score - r.score < resolution);
     // Refused after the observability check below, whose reason is the more fundamental one
     // (a corridor is ambiguous along its axis because nothing constrains that direction).
     let ambiguity = (ambiguous && options.refuse_ambiguous).then(|| {
