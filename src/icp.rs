@@ -426,9 +426,39 @@ pub fn point_to_plane_icp(
 ) -> Result<IcpResult> {
     options.validate()?;
     ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
-    let stride = target.len().div_ceil(options.samples).max(1);
-    let samples: Vec<Sample> = target.iter().step_by(stride).map(|p| (*p, None)).collect();
+    let samples = stride_samples(target, options);
     icp_on_samples(reference, &samples, initial, options, 0.0)
+}
+
+/// At most `options.samples` of `target`, by a fixed stride, without normals.
+fn stride_samples(target: &[Point3<f64>], options: &IcpOptions) -> Vec<Sample> {
+    let stride = target.len().div_ceil(options.samples).max(1);
+    target.iter().step_by(stride).map(|p| (*p, None)).collect()
+}
+
+/// What [`point_to_plane_icp`] reports, at `pose` as it stands: no step is taken, pairs are
+/// sought within `options.min_distance`, `iterations` is 0 and `converged` true. For comparing a
+/// pose found otherwise (a plane fit) with an ICP result on the same terms.
+///
+/// Errors: [`Error::InvalidInput`] for bad options or points.
+pub fn point_to_plane_fit(
+    reference: &SurfaceCloud,
+    target: &[Point3<f64>],
+    pose: &Isometry3<f64>,
+    options: &IcpOptions,
+) -> Result<IcpResult> {
+    options.validate()?;
+    ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
+    let samples = stride_samples(target, options);
+    Ok(summarise(
+        reference,
+        &samples,
+        pose,
+        options.min_distance,
+        0.0,
+        0,
+        true,
+    ))
 }
 
 /// [`point_to_plane_icp`] with the target as a [`SurfaceCloud`] too: a pair counts only when
@@ -520,7 +550,28 @@ fn icp_on_samples(
         }
         distance = (distance * options.shrink).max(options.min_distance);
     }
-    let sums = linearise(reference, samples, &pose, distance, min_normal_cos);
+    Ok(summarise(
+        reference,
+        samples,
+        &pose,
+        distance,
+        min_normal_cos,
+        iterations,
+        converged,
+    ))
+}
+
+/// The [`IcpResult`] at `pose`: correspondences within `distance`, information, covariance.
+fn summarise(
+    reference: &SurfaceCloud,
+    samples: &[Sample],
+    pose: &Isometry3<f64>,
+    distance: f64,
+    min_normal_cos: f64,
+    iterations: usize,
+    converged: bool,
+) -> IcpResult {
+    let sums = linearise(reference, samples, pose, distance, min_normal_cos);
     let information = sums.ne.hessian;
     let dof = sums.weight - 6.0;
     let covariance = if dof > 0.0 {
@@ -529,8 +580,8 @@ fn icp_on_samples(
     } else {
         None
     };
-    Ok(IcpResult {
-        pose,
+    IcpResult {
+        pose: *pose,
         iterations,
         converged,
         correspondences: sums.matched,
@@ -542,7 +593,7 @@ fn icp_on_samples(
         },
         information,
         covariance,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -591,6 +642,44 @@ mod tests {
         // the share is far below the targetless refusal threshold (1 %).
         assert!(share < 1e-3, "{share}");
         assert!(dir.x.abs() > 0.999, "{dir}");
+    }
+
+    #[test]
+    fn fit_reports_the_pose_as_it_stands() {
+        // An open box corner; the fit at a pose 5 cm off reports that pose, a worse RMS than at
+        // the truth, and the same statistics ICP reports once it has converged there.
+        let mut pts = Vec::new();
+        for i in 0..30 {
+            for j in 0..30 {
+                let (a, b) = (i as f64 * 0.1, j as f64 * 0.1);
+                pts.push(Point3::new(a, b, 0.0));
+                pts.push(Point3::new(a, 0.0, b));
+                pts.push(Point3::new(0.0, a, b));
+            }
+        }
+        let reference = SurfaceCloud::new(pts.clone()).unwrap();
+        let options = IcpOptions::default();
+        let off = Isometry3::translation(0.03, 0.04, 0.0);
+        let at_off = point_to_plane_fit(&reference, &pts, &off, &options).unwrap();
+        assert_eq!(at_off.pose, off);
+        assert_eq!((at_off.iterations, at_off.converged), (0, true));
+        let icp = point_to_plane_icp(&reference, &pts, &off, &options).unwrap();
+        assert!(icp.converged && icp.pose.translation.vector.norm() < 1e-3);
+        let at_truth = point_to_plane_fit(&reference, &pts, &icp.pose, &options).unwrap();
+        assert!(
+            at_off.rmse > 10.0 * at_truth.rmse,
+            "{} {}",
+            at_off.rmse,
+            at_truth.rmse
+        );
+        assert!((at_truth.rmse - icp.rmse).abs() < 1e-9);
+        assert_eq!(at_truth.correspondences, icp.correspondences);
+        // Bad options are refused as by ICP.
+        let bad = IcpOptions {
+            samples: 0,
+            ..options
+        };
+        assert!(point_to_plane_fit(&reference, &pts, &off, &bad).is_err());
     }
 
     #[test]
