@@ -424,16 +424,17 @@ pub fn point_to_plane_icp(
     initial: &Isometry3<f64>,
     options: &IcpOptions,
 ) -> Result<IcpResult> {
-    options.validate()?;
-    ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
-    let samples = stride_samples(target, options);
+    let samples = stride_samples(target, options)?;
     icp_on_samples(reference, &samples, initial, options, 0.0)
 }
 
-/// At most `options.samples` of `target`, by a fixed stride, without normals.
-fn stride_samples(target: &[Point3<f64>], options: &IcpOptions) -> Vec<Sample> {
+/// At most `options.samples` of `target`, by a fixed stride, without normals, once the options
+/// and the points are checked.
+fn stride_samples(target: &[Point3<f64>], options: &IcpOptions) -> Result<Vec<Sample>> {
+    options.validate()?;
+    ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
     let stride = target.len().div_ceil(options.samples).max(1);
-    target.iter().step_by(stride).map(|p| (*p, None)).collect()
+    Ok(target.iter().step_by(stride).map(|p| (*p, None)).collect())
 }
 
 /// What [`point_to_plane_icp`] reports, at `pose` as it stands: no step is taken, pairs are
@@ -447,9 +448,7 @@ pub fn point_to_plane_fit(
     pose: &Isometry3<f64>,
     options: &IcpOptions,
 ) -> Result<IcpResult> {
-    options.validate()?;
-    ensure_finite("target", target.iter().flat_map(|p| p.coords.iter()))?;
-    let samples = stride_samples(target, options);
+    let samples = stride_samples(target, options)?;
     Ok(summarise(
         reference,
         &samples,
