@@ -154,8 +154,9 @@ pub const SLIDE_CELL: f64 = 0.5;
 /// refused as unsettled that settle on the truth within 100.
 pub const FINAL_ICP_ITERATIONS: usize = 100;
 /// Verified hypotheses within [`DISTINCT_ANGLE`] / [`DISTINCT_DISTANCE`] of the winner (the same
-/// answer to the ranking) that are also run through the final ICP; see [`prefer_free_space`]
-/// (the plane refinement's pose is the other candidate).
+/// answer to the ranking) that are also run through the final ICP; the one that settles elsewhere
+/// and keeps the other sensor's free space clearer replaces the result (the plane refinement's
+/// pose is the other candidate; see [`SCORE_MARGIN`]).
 pub const NEAR_ALTERNATIVES: usize = 2;
 /// Poses within this angle (radians, 0.5 deg) ...
 pub const SETTLED_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
@@ -163,7 +164,7 @@ pub const SETTLED_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
 pub const SETTLED_DISTANCE: f64 = 0.06;
 /// A candidate replaces the final ICP result when it puts fewer points into the other sensor's
 /// free space and its score on the check's figures, `agreement - VIOLATION_WEIGHT violations`
-/// (as in the verification), is higher by at least this much (see [`prefer_free_space`]).
+/// (as in the verification), is higher by at least this much, and it passes the check.
 pub const SCORE_MARGIN: f64 = 0.02;
 /// Pairs of the best pose and a close contender polished by the full ICP before the result is
 /// called ambiguous or not (see the verification in [`calibrate_targetless`]).
@@ -1585,7 +1586,8 @@ pub fn calibrate_targetless(
     };
     let mut pose = icp.map_or(plane_pose, |r| r.pose);
     let mut icp = icp;
-    if let Some(main) = icp {
+    // (Not for a result about to be refused as ambiguous: that refusal stands either way.)
+    if let Some(main) = icp.filter(|_| ambiguity.is_none()) {
         // Hypotheses within DISTINCT of the winner were never polished on their own; when one
         // settles clearly elsewhere, the check's free space decides between the two.
         let near: Vec<Isometry3<f64>> = ranked
