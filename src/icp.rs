@@ -644,6 +644,27 @@ mod tests {
     }
 
     #[test]
+    fn duplicate_points_are_indexed() {
+        // Many copies of one point (a scan of a sensor's own housing, replayed frames) beside a
+        // plane: the k-d tree takes them, neighbour queries answer, nothing panics.
+        let mut pts = vec![Point3::new(1.0, 1.0, 1.0); 2000];
+        for i in 0..20 {
+            for j in 0..20 {
+                pts.push(Point3::new(i as f64 * 0.1, j as f64 * 0.1, 0.0));
+            }
+        }
+        let cloud = SurfaceCloud::new(pts).unwrap();
+        let (i, d2) = cloud.nearest(&Point3::new(1.0, 1.0, 1.05), 0.1).unwrap();
+        assert!(i < 2000 && (d2 - 0.0025).abs() < 1e-12);
+        assert!(
+            cloud.normal(0).is_none(),
+            "a heap of one point has no surface"
+        );
+        assert!(cloud.normal(2000 + 21).is_some());
+        assert!(!cloud.any_within(&Point3::new(5.0, 5.0, 5.0), 1.0));
+    }
+
+    #[test]
     fn fit_reports_the_pose_as_it_stands() {
         // An open box corner; the fit at a pose 5 cm off reports that pose, a worse RMS than at
         // the truth, and the same statistics ICP reports once it has converged there.
