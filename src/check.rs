@@ -356,6 +356,7 @@ impl std::fmt::Display for CheckReport {
 }
 
 /// One cloud, downsampled and indexed, with its sensor's range image.
+#[derive(Debug)]
 struct Side {
     surface: SurfaceCloud,
     samples: Vec<Point3<f64>>,
@@ -486,199 +487,270 @@ pub fn check(
     reference_from_target: &Isometry3<f64>,
     options: &CheckOptions,
 ) -> Result<CheckReport> {
-    options.validate()?;
-    ensure_points("reference", reference)?;
-    ensure_points("target", target)?;
-    let t = reference_from_target;
-    if !(t.translation.vector.iter().all(|v| v.is_finite())
-        && t.rotation.coords.iter().all(|v| v.is_finite()))
-    {
-        return Err(Error::InvalidInput(
-            "the transform has non-finite entries".into(),
-        ));
-    }
-    let (r, g) = crate::join(
-        || Side::new(reference, options),
-        || Side::new(target, options),
-    );
-    let (r, g) = (r?, g?);
+    PreparedPair::new(reference, target, options)?.check(reference_from_target)
+}
 
-    // Residuals both ways at a pose: target samples on the reference surface, reference samples
-    // on the target surface.
-    let both_ways = |pose: &Isometry3<f64>| {
-        let inverse = pose.inverse();
-        crate::join(
-            || residuals(&r.surface, &g.samples, pose, options.overlap_distance),
-            || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
-        )
-    };
-    // Agreement both ways at the given pose.
-    let inverse = t.inverse();
-    let ((overlap_t, mut res_t), (overlap_r, res_r)) = both_ways(t);
-    let (normals_t, normals_r) = (res_t.len(), res_r.len());
-    // The noise scale comes from each cloud alone (how thick its surfaces are), never from the
-    // residuals under the pose being checked: a pose 10 cm off would otherwise measure a 10 cm
-    // noise and agree with itself.
-    let noise = options.noise.unwrap_or_else(|| {
-        let (a, b) = crate::join(|| r.thickness(), || g.thickness());
-        (THICKNESS_SCALE * (a * a + b * b).sqrt()).clamp(MIN_NOISE, MAX_NOISE)
-    });
-    let limit = 3.0 * noise;
-    let agree = |res: &[f64]| {
-        if res.is_empty() {
+/// [`check`] as a gate: `Ok(report)` when the verdict is consistent, otherwise
+/// `Err(Calibration)` of the report's failure kind naming the reason. Every calibration method
+/// passes its final pose through it.
+pub fn certify(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    reference_from_target: &Isometry3<f64>,
+    options: &CheckOptions,
+) -> Result<CheckReport> {
+    PreparedPair::new(reference, target, options)?.certify(reference_from_target)
+}
+
+/// `Err(InvalidInput)` for a transform with non-finite entries.
+fn ensure_transform(t: &Isometry3<f64>) -> Result<()> {
+    if t.translation.vector.iter().all(|v| v.is_finite())
+        && t.rotation.coords.iter().all(|v| v.is_finite())
+    {
+        Ok(())
+    } else {
+        Err(Error::InvalidInput(
+            "the transform has non-finite entries".into(),
+        ))
+    }
+}
+
+/// Two clouds made ready for [`check`] once: each downsampled, indexed and binned into its range
+/// image, and the noise scale measured. That is most of a check and does not depend on the pose,
+/// so a method choosing between several poses of one pair checks them all from one preparation.
+#[derive(Debug)]
+pub struct PreparedPair {
+    reference: Side,
+    target: Side,
+    noise: f64,
+    options: CheckOptions,
+}
+
+impl PreparedPair {
+    /// Prepares `reference` and `target` (each in its own sensor's frame) under `options`.
+    ///
+    /// Errors: [`Error::InvalidInput`] for bad options, non-finite or far-out points, or a cloud
+    /// with fewer than ten points.
+    pub fn new(
+        reference: &[Point3<f64>],
+        target: &[Point3<f64>],
+        options: &CheckOptions,
+    ) -> Result<Self> {
+        options.validate()?;
+        ensure_points("reference", reference)?;
+        ensure_points("target", target)?;
+        let (r, g) = crate::join(
+            || Side::new(reference, options),
+            || Side::new(target, options),
+        );
+        let (r, g) = (r?, g?);
+        // The noise scale comes from each cloud alone (how thick its surfaces are), never from
+        // the residuals under the pose being checked: a pose 10 cm off would otherwise measure a
+        // 10 cm noise and agree with itself.
+        let noise = options.noise.unwrap_or_else(|| {
+            let (a, b) = crate::join(|| r.thickness(), || g.thickness());
+            (THICKNESS_SCALE * (a * a + b * b).sqrt()).clamp(MIN_NOISE, MAX_NOISE)
+        });
+        Ok(PreparedPair {
+            reference: r,
+            target: g,
+            noise,
+            options: *options,
+        })
+    }
+
+    /// [`certify`] on the prepared pair.
+    pub fn certify(&self, reference_from_target: &Isometry3<f64>) -> Result<CheckReport> {
+        let report = self.check(reference_from_target)?;
+        match report.failure {
+            None => Ok(report),
+            Some(kind) => Err(Error::calibration(
+                kind,
+                format!(
+                    "the result did not pass the check ({}): {}",
+                    report.verdict, report.reason
+                ),
+            )),
+        }
+    }
+
+    /// [`check`] on the prepared pair.
+    ///
+    /// Errors: [`Error::InvalidInput`] for a non-finite transform.
+    pub fn check(&self, reference_from_target: &Isometry3<f64>) -> Result<CheckReport> {
+        ensure_transform(reference_from_target)?;
+        let t = reference_from_target;
+        let (r, g, options, noise) = (&self.reference, &self.target, &self.options, self.noise);
+
+        // Residuals both ways at a pose: target samples on the reference surface, reference samples
+        // on the target surface.
+        let both_ways = |pose: &Isometry3<f64>| {
+            let inverse = pose.inverse();
+            crate::join(
+                || residuals(&r.surface, &g.samples, pose, options.overlap_distance),
+                || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
+            )
+        };
+        // Agreement both ways at the given pose.
+        let inverse = t.inverse();
+        let ((overlap_t, mut res_t), (overlap_r, res_r)) = both_ways(t);
+        let (normals_t, normals_r) = (res_t.len(), res_r.len());
+        let limit = 3.0 * noise;
+        let agree = |res: &[f64]| {
+            if res.is_empty() {
+                0.0
+            } else {
+                res.iter().filter(|r| **r <= limit).count() as f64 / res.len() as f64
+            }
+        };
+        let agreement = agree(&res_t);
+        let reverse_agreement = agree(&res_r);
+        res_t.retain(|r| *r <= limit);
+        let rmse = if res_t.is_empty() {
             0.0
         } else {
-            res.iter().filter(|r| **r <= limit).count() as f64 / res.len() as f64
-        }
-    };
-    let agreement = agree(&res_t);
-    let reverse_agreement = agree(&res_r);
-    res_t.retain(|r| *r <= limit);
-    let rmse = if res_t.is_empty() {
-        0.0
-    } else {
-        (res_t.iter().map(|r| r * r).sum::<f64>() / res_t.len() as f64).sqrt()
-    };
-    let overlap = overlap_t as f64 / g.samples.len().max(1) as f64;
-    let reverse_overlap = overlap_r as f64 / r.samples.len().max(1) as f64;
+            (res_t.iter().map(|r| r * r).sum::<f64>() / res_t.len() as f64).sqrt()
+        };
+        let overlap = overlap_t as f64 / g.samples.len().max(1) as f64;
+        let reverse_overlap = overlap_r as f64 / r.samples.len().max(1) as f64;
 
-    // Free space both ways.
-    let violations = violation_share(&r.image, &g.samples, t);
-    let reverse_violations = violation_share(&g.image, &r.samples, &inverse);
+        // Free space both ways.
+        let violations = violation_share(&r.image, &g.samples, t);
+        let reverse_violations = violation_share(&g.image, &r.samples, &inverse);
 
-    // Local re-alignment and observability.
-    let icp_options = IcpOptions {
-        // From a correct pose a 1 m gate let box tops and ground pull a cluttered 16-beam corner
-        // 15 cm off before the gate closed; 30 cm leaves it in place and still pulls back a
-        // 1 degree or 10 cm error.
-        max_distance: REALIGN_START.max(8.0 * noise),
-        // A sparse scene needs the final gate near the noise: at 20 cm, neighbouring scan rings
-        // of a 16-beam unit pulled a corner's pose 30 cm along its weakest direction (at 10 cm
-        // it stayed). Real clouds (2-3 cm thick surfaces) end near 20 cm.
-        min_distance: (8.0 * noise).max(options.voxel_size),
-        samples: options.samples,
-        step_tolerance: REALIGN_STEP_TOLERANCE,
-        ..IcpOptions::default()
-    };
-    // Too few correspondences is a finding (unverifiable); anything else is an error.
-    let icp = match point_to_plane_icp_with_normals(
-        &r.surface,
-        &g.surface,
-        t,
-        &icp_options,
-        MAX_NORMAL_ANGLE,
-    ) {
-        Ok(result) => Some(result),
-        Err(Error::Calibration { .. }) => None,
-        Err(e) => return Err(e),
-    };
-    let (
-        aligned,
-        correction_rotation,
-        correction_translation,
-        weakest_translation,
-        weakest_rotation,
-        covariance,
-    ) = match &icp {
-        Some(icp) => {
-            let delta = icp.pose * inverse;
+        // Local re-alignment and observability.
+        let icp_options = IcpOptions {
+            // From a correct pose a 1 m gate let box tops and ground pull a cluttered 16-beam corner
+            // 15 cm off before the gate closed; 30 cm leaves it in place and still pulls back a
+            // 1 degree or 10 cm error.
+            max_distance: REALIGN_START.max(8.0 * noise),
+            // A sparse scene needs the final gate near the noise: at 20 cm, neighbouring scan rings
+            // of a 16-beam unit pulled a corner's pose 30 cm along its weakest direction (at 10 cm
+            // it stayed). Real clouds (2-3 cm thick surfaces) end near 20 cm.
+            min_distance: (8.0 * noise).max(options.voxel_size),
+            samples: options.samples,
+            step_tolerance: REALIGN_STEP_TOLERANCE,
+            ..IcpOptions::default()
+        };
+        // Too few correspondences is a finding (unverifiable); anything else is an error.
+        let icp = match point_to_plane_icp_with_normals(
+            &r.surface,
+            &g.surface,
+            t,
+            &icp_options,
+            MAX_NORMAL_ANGLE,
+        ) {
+            Ok(result) => Some(result),
+            Err(Error::Calibration { .. }) => None,
+            Err(e) => return Err(e),
+        };
+        let (
+            aligned,
+            correction_rotation,
+            correction_translation,
+            weakest_translation,
+            weakest_rotation,
+            covariance,
+        ) = match &icp {
+            Some(icp) => {
+                let delta = icp.pose * inverse;
+                (
+                    icp.pose,
+                    rotation_angle(&delta.rotation.to_rotation_matrix()),
+                    (icp.pose.translation.vector - t.translation.vector).norm(),
+                    weakest_direction(&icp.information.fixed_view::<3, 3>(0, 0).into_owned()),
+                    weakest_direction(&icp.information.fixed_view::<3, 3>(3, 3).into_owned()),
+                    icp.covariance,
+                )
+            }
+            None => (*t, 0.0, 0.0, (Vector3::x(), 0.0), (Vector3::x(), 0.0), None),
+        };
+        let agreement_gain = icp.as_ref().map_or(0.0, |icp| {
+            let ((_, forward), (_, backward)) = both_ways(&icp.pose);
+            (agree(&forward) - agreement).min(agree(&backward) - reverse_agreement)
+        });
+        // Tolerances: the floors, or three standard deviations of the aligned pose where larger.
+        let (sd_t, sd_r) = covariance
+            .map(|c| {
+                let t3 = c
+                    .fixed_view::<3, 3>(0, 0)
+                    .symmetric_eigenvalues()
+                    .amax()
+                    .max(0.0)
+                    .sqrt();
+                let r3 = c
+                    .fixed_view::<3, 3>(3, 3)
+                    .symmetric_eigenvalues()
+                    .amax()
+                    .max(0.0)
+                    .sqrt();
+                (t3, r3)
+            })
+            .unwrap_or((f64::INFINITY, f64::INFINITY));
+        let detectable_rotation = options.rotation_tolerance.max(3.0 * sd_r);
+        let detectable_translation = options.translation_tolerance.max(3.0 * sd_t);
+        // The correction against its tolerance, subspace by subspace: fine along what the overlap
+        // constrains well, weak (a gross error only) along the rest.
+        let excess = icp.as_ref().map_or(0.0, |icp| {
+            let delta = se3_log(&(icp.pose * inverse));
+            let block = |k: usize| icp.information.fixed_view::<3, 3>(k, k).into_owned();
+            // The move of the target sensor itself (the tangent's translation would add the
+            // rotation's lever arm about the reference origin).
+            let rho = icp.pose.translation.vector - t.translation.vector;
+            let phi = Vector3::new(delta[3], delta[4], delta[5]);
+            let translation = excess(
+                &block(0),
+                &rho,
+                detectable_translation,
+                options
+                    .weak_translation_tolerance
+                    .max(detectable_translation),
+                options.strong_share,
+            );
+            let rotation = excess(
+                &block(3),
+                &phi,
+                detectable_rotation,
+                options.weak_rotation_tolerance.max(detectable_rotation),
+                options.strong_share,
+            );
+            translation.max(rotation)
+        });
+
+        let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
+        let pct = |v: f64| v * 100.0;
+        let (verdict, failure, reason) = if overlap_t < MIN_OVERLAP_POINTS
+            || normals_t.min(normals_r) < MIN_OVERLAP_POINTS / 2
+            || overlap < options.min_overlap
+        {
             (
-                icp.pose,
-                rotation_angle(&delta.rotation.to_rotation_matrix()),
-                (icp.pose.translation.vector - t.translation.vector).norm(),
-                weakest_direction(&icp.information.fixed_view::<3, 3>(0, 0).into_owned()),
-                weakest_direction(&icp.information.fixed_view::<3, 3>(3, 3).into_owned()),
-                icp.covariance,
-            )
-        }
-        None => (*t, 0.0, 0.0, (Vector3::x(), 0.0), (Vector3::x(), 0.0), None),
-    };
-    let agreement_gain = icp.as_ref().map_or(0.0, |icp| {
-        let ((_, forward), (_, backward)) = both_ways(&icp.pose);
-        (agree(&forward) - agreement).min(agree(&backward) - reverse_agreement)
-    });
-    // Tolerances: the floors, or three standard deviations of the aligned pose where larger.
-    let (sd_t, sd_r) = covariance
-        .map(|c| {
-            let t3 = c
-                .fixed_view::<3, 3>(0, 0)
-                .symmetric_eigenvalues()
-                .amax()
-                .max(0.0)
-                .sqrt();
-            let r3 = c
-                .fixed_view::<3, 3>(3, 3)
-                .symmetric_eigenvalues()
-                .amax()
-                .max(0.0)
-                .sqrt();
-            (t3, r3)
-        })
-        .unwrap_or((f64::INFINITY, f64::INFINITY));
-    let detectable_rotation = options.rotation_tolerance.max(3.0 * sd_r);
-    let detectable_translation = options.translation_tolerance.max(3.0 * sd_t);
-    // The correction against its tolerance, subspace by subspace: fine along what the overlap
-    // constrains well, weak (a gross error only) along the rest.
-    let excess = icp.as_ref().map_or(0.0, |icp| {
-        let delta = se3_log(&(icp.pose * inverse));
-        let block = |k: usize| icp.information.fixed_view::<3, 3>(k, k).into_owned();
-        // The move of the target sensor itself (the tangent's translation would add the
-        // rotation's lever arm about the reference origin).
-        let rho = icp.pose.translation.vector - t.translation.vector;
-        let phi = Vector3::new(delta[3], delta[4], delta[5]);
-        let translation = excess(
-            &block(0),
-            &rho,
-            detectable_translation,
-            options
-                .weak_translation_tolerance
-                .max(detectable_translation),
-            options.strong_share,
-        );
-        let rotation = excess(
-            &block(3),
-            &phi,
-            detectable_rotation,
-            options.weak_rotation_tolerance.max(detectable_rotation),
-            options.strong_share,
-        );
-        translation.max(rotation)
-    });
-
-    let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
-    let pct = |v: f64| v * 100.0;
-    let (verdict, failure, reason) = if overlap_t < MIN_OVERLAP_POINTS
-        || normals_t.min(normals_r) < MIN_OVERLAP_POINTS / 2
-        || overlap < options.min_overlap
-    {
-        (
-            Verdict::Unverifiable,
-            Some(FailureKind::TooFewFeatures),
-            format!(
+                Verdict::Unverifiable,
+                Some(FailureKind::TooFewFeatures),
+                format!(
                 "too little overlap: {overlap_t} target points ({:.1} %) land within {:.2} m of \
                  the reference (need {MIN_OVERLAP_POINTS} and {:.1} %)",
                 pct(overlap),
                 options.overlap_distance,
                 pct(options.min_overlap)
             ),
-        )
-    } else if violations.max(reverse_violations) > options.max_violations {
-        (
-            Verdict::Inconsistent,
-            Some(FailureKind::NoAgreement),
-            format!(
+            )
+        } else if violations.max(reverse_violations) > options.max_violations {
+            (
+                Verdict::Inconsistent,
+                Some(FailureKind::NoAgreement),
+                format!(
                 "{:.1} % of the target points and {:.1} % of the reference points land in space \
                  the other sensor saw through (> {:.1} %)",
                 pct(violations),
                 pct(reverse_violations),
                 pct(options.max_violations)
             ),
-        )
-    } else if agreement.min(reverse_agreement) < options.min_agreement {
-        (
-            Verdict::Inconsistent,
-            Some(FailureKind::NoAgreement),
-            format!(
+            )
+        } else if agreement.min(reverse_agreement) < options.min_agreement {
+            (
+                Verdict::Inconsistent,
+                Some(FailureKind::NoAgreement),
+                format!(
                 "only {:.1} % of the overlapping target points and {:.1} % of the reference points \
                  lie within {:.1} cm of the other's surface (< {:.0} %)",
                 pct(agreement),
@@ -686,15 +758,15 @@ pub fn check(
                 limit * 100.0,
                 pct(options.min_agreement)
             ),
-        )
-    } else if icp.is_none() {
-        (
-            Verdict::Unverifiable,
-            Some(FailureKind::TooFewFeatures),
-            "the local re-alignment found too few correspondences".to_string(),
-        )
-    } else if excess > 1.0 {
-        (
+            )
+        } else if icp.is_none() {
+            (
+                Verdict::Unverifiable,
+                Some(FailureKind::TooFewFeatures),
+                "the local re-alignment found too few correspondences".to_string(),
+            )
+        } else if excess > 1.0 {
+            (
             Verdict::Inconsistent,
             Some(FailureKind::NoAgreement),
             format!(
@@ -708,11 +780,11 @@ pub fn check(
                 options.weak_translation_tolerance * 100.0
             ),
         )
-    } else if agreement_gain > options.max_agreement_gain {
-        (
-            Verdict::Inconsistent,
-            Some(FailureKind::NoAgreement),
-            format!(
+        } else if agreement_gain > options.max_agreement_gain {
+            (
+                Verdict::Inconsistent,
+                Some(FailureKind::NoAgreement),
+                format!(
                 "a pose {:.2} deg / {:.1} cm away fits clearly more points: the agreement rises by \
                  {:.1} points both ways (> {:.1})",
                 correction_rotation.to_degrees(),
@@ -720,86 +792,65 @@ pub fn check(
                 pct(agreement_gain),
                 pct(options.max_agreement_gain)
             ),
-        )
-    } else if weakest_translation.1 < options.min_information_share {
-        (
-            Verdict::Unverifiable,
-            Some(FailureKind::Unobservable),
-            format!(
-                "the overlap does not constrain the translation along {} ({:.2} % of the \
+            )
+        } else if weakest_translation.1 < options.min_information_share {
+            (
+                Verdict::Unverifiable,
+                Some(FailureKind::Unobservable),
+                format!(
+                    "the overlap does not constrain the translation along {} ({:.2} % of the \
                  information < {:.2} %): an error along it would go unseen",
-                fmt(&weakest_translation.0),
-                pct(weakest_translation.1),
-                pct(options.min_information_share)
-            ),
-        )
-    } else if weakest_rotation.1 < options.min_information_share {
-        (
-            Verdict::Unverifiable,
-            Some(FailureKind::Unobservable),
-            format!(
+                    fmt(&weakest_translation.0),
+                    pct(weakest_translation.1),
+                    pct(options.min_information_share)
+                ),
+            )
+        } else if weakest_rotation.1 < options.min_information_share {
+            (
+                Verdict::Unverifiable,
+                Some(FailureKind::Unobservable),
+                format!(
                 "the overlap does not constrain the rotation about {} ({:.2} % of the information \
                  < {:.2} %): an error about it would go unseen",
                 fmt(&weakest_rotation.0),
                 pct(weakest_rotation.1),
                 pct(options.min_information_share)
             ),
-        )
-    } else {
-        (
-            Verdict::Consistent,
-            None,
-            format!(
+            )
+        } else {
+            (
+                Verdict::Consistent,
+                None,
+                format!(
                 "the clouds agree and a local re-alignment moves the pose by {:.2} deg / {:.1} cm",
                 correction_rotation.to_degrees(),
                 correction_translation * 100.0
             ),
-        )
-    };
-    Ok(CheckReport {
-        verdict,
-        reason,
-        overlap,
-        reverse_overlap,
-        agreement,
-        reverse_agreement,
-        agreement_gain,
-        violations,
-        reverse_violations,
-        rmse,
-        noise,
-        overlap_points: overlap_t,
-        aligned,
-        correction_rotation,
-        correction_translation,
-        weakest_translation,
-        weakest_rotation,
-        detectable_rotation,
-        detectable_translation,
-        covariance,
-        failure,
-    })
-}
-
-/// [`check`] as a gate: `Ok(report)` when the verdict is consistent, otherwise
-/// `Err(Calibration)` of the report's failure kind naming the reason. Every calibration method
-/// passes its final pose through it.
-pub fn certify(
-    reference: &[Point3<f64>],
-    target: &[Point3<f64>],
-    reference_from_target: &Isometry3<f64>,
-    options: &CheckOptions,
-) -> Result<CheckReport> {
-    let report = check(reference, target, reference_from_target, options)?;
-    match report.failure {
-        None => Ok(report),
-        Some(kind) => Err(Error::calibration(
-            kind,
-            format!(
-                "the result did not pass the check ({}): {}",
-                report.verdict, report.reason
-            ),
-        )),
+            )
+        };
+        Ok(CheckReport {
+            verdict,
+            reason,
+            overlap,
+            reverse_overlap,
+            agreement,
+            reverse_agreement,
+            agreement_gain,
+            violations,
+            reverse_violations,
+            rmse,
+            noise,
+            overlap_points: overlap_t,
+            aligned,
+            correction_rotation,
+            correction_translation,
+            weakest_translation,
+            weakest_rotation,
+            detectable_rotation,
+            detectable_translation,
+            covariance,
+            failure,
+        })
     }
 }
 

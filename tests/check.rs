@@ -1,6 +1,6 @@
 //! `lidarcal::check`: verdicts on simulated scenes with known truth, the gate `certify`, bad input.
 
-use lidarcal::check::{certify, check, CheckOptions, Verdict};
+use lidarcal::check::{certify, check, CheckOptions, PreparedPair, Verdict};
 use lidarcal::sim::scenes::{corridor_scene, street_scene, StreetOptions};
 use lidarcal::{Error, FailureKind};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -26,6 +26,32 @@ fn the_truth_is_consistent_and_gross_errors_are_not() {
         let err = certify(&reference, &target, &wrong, &options).unwrap_err();
         assert!(err.kind().is_some(), "{err}");
     }
+}
+
+#[test]
+fn a_prepared_pair_reports_what_check_reports_at_every_pose() {
+    let scene = street_scene(&StreetOptions::default()).unwrap();
+    let (reference, target) = (scene.reference.positions(), scene.target.positions());
+    let truth = scene.reference_from_target;
+    let options = CheckOptions::default();
+    let pair = PreparedPair::new(&reference, &target, &options).unwrap();
+    let shifted = Translation3::new(0.0, 0.0, 0.25) * truth;
+    for pose in [truth, shifted, truth] {
+        let (once, alone) = (
+            pair.check(&pose).unwrap(),
+            check(&reference, &target, &pose, &options).unwrap(),
+        );
+        assert_eq!(once.verdict, alone.verdict);
+        assert_eq!(once.reason, alone.reason);
+        assert_eq!(once.aligned, alone.aligned);
+        assert_eq!(once.agreement.to_bits(), alone.agreement.to_bits());
+        assert_eq!(once.violations.to_bits(), alone.violations.to_bits());
+        assert_eq!(once.noise.to_bits(), alone.noise.to_bits());
+    }
+    assert!(pair.certify(&truth).is_ok());
+    assert!(pair.certify(&shifted).unwrap_err().kind().is_some());
+    let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
+    assert!(matches!(pair.check(&nan), Err(Error::InvalidInput(_))));
 }
 
 #[test]

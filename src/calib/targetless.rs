@@ -88,13 +88,14 @@
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
+use std::cell::OnceCell;
 use std::collections::{HashMap, HashSet};
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::planes::estimate_threshold;
 use super::{Stopwatch, Timings};
-use crate::check::{certify, CheckOptions, CheckReport};
+use crate::check::{certify, CheckOptions, CheckReport, PreparedPair};
 use crate::error::{ensure_finite, ensure_positive, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::{rotation_angle, Plane};
@@ -1118,7 +1119,8 @@ fn verify_icp_options() -> IcpOptions {
 }
 
 /// The final ICP result `main`, or the first of `candidates` (other results for the same answer)
-/// that settles elsewhere and fits better on the [`check`](crate::check::check)'s own figures: it
+/// that settles elsewhere and fits better on the [`check`](crate::check::check)'s own figures (the
+/// two clouds prepared for it once, by `prepare`): it
 /// must pass the check, put fewer points into the other sensor's free space (both ways
 /// together), and score `agreement - VIOLATION_WEIGHT violations` (the smaller agreement of the
 /// two ways) at least [`SCORE_MARGIN`] higher.
@@ -1127,26 +1129,22 @@ fn verify_icp_options() -> IcpOptions {
 /// the truth along the weakest direction, a point or two of agreement above the truth but with
 /// 3-13 % of the points in space the other sensor saw through (the truth: under 1 %). Both pass
 /// the check, whose local re-alignment cannot see the other.
-fn prefer_free_space(
-    reference: &[Point3<f64>],
-    target: &[Point3<f64>],
+fn prefer_free_space<'a>(
     main: IcpResult,
     candidates: impl IntoIterator<Item = IcpResult>,
-    options: &CheckOptions,
+    prepare: impl Fn() -> Result<&'a PreparedPair>,
 ) -> IcpResult {
     // (passes, share of points in free space, score)
     let judge = |pose: &Isometry3<f64>| {
-        crate::check::check(reference, target, pose, options)
-            .ok()
-            .map(|c| {
-                let free = c.violations + c.reverse_violations;
-                let agreement = c.agreement.min(c.reverse_agreement);
-                (
-                    c.failure.is_none(),
-                    free,
-                    agreement - VIOLATION_WEIGHT * free,
-                )
-            })
+        prepare().and_then(|pair| pair.check(pose)).ok().map(|c| {
+            let free = c.violations + c.reverse_violations;
+            let agreement = c.agreement.min(c.reverse_agreement);
+            (
+                c.failure.is_none(),
+                free,
+                agreement - VIOLATION_WEIGHT * free,
+            )
+        })
     };
     let mut best = main;
     let mut best_judged = None;
@@ -1586,6 +1584,16 @@ pub fn calibrate_targetless(
     };
     let mut pose = icp.map_or(plane_pose, |r| r.pose);
     let mut icp = icp;
+    // The check's preparation of the two clouds (most of its work), made at most once for every
+    // pose checked from here on.
+    let prepared = OnceCell::new();
+    let prepare = || -> Result<&PreparedPair> {
+        if let Some(pair) = prepared.get() {
+            return Ok(pair);
+        }
+        let pair = PreparedPair::new(reference, target, &options.check)?;
+        Ok(prepared.get_or_init(|| pair))
+    };
     // (Not for a result about to be refused as ambiguous: that refusal stands either way.)
     if let Some(main) = icp.filter(|_| ambiguity.is_none()) {
         // Hypotheses within DISTINCT of the winner were never polished on their own; when one
@@ -1616,13 +1624,7 @@ pub fn calibrate_targetless(
             &options.icp_options,
         )
         .ok();
-        let chosen = prefer_free_space(
-            reference,
-            target,
-            main,
-            settled.chain(plane),
-            &options.check,
-        );
+        let chosen = prefer_free_space(main, settled.chain(plane), prepare);
         pose = chosen.pose;
         icp = Some(chosen);
     }
@@ -1744,7 +1746,7 @@ pub fn calibrate_targetless(
         (None, Some(rep)) => rep.covariance(),
         _ => None,
     };
-    let check = certify(reference, target, &pose, &options.check)?;
+    let check = prepare()?.certify(&pose)?;
     let result = TargetlessCalibration {
         check,
         reference_from_target: pose,
