@@ -38,7 +38,7 @@
 //! * `python`: the PyO3 extension module; only maturin turns it on.
 //!
 //! With `default-features = false` the crate depends on nalgebra, rand (with rand_chacha and
-//! rand_distr), kiddo and thiserror only (no rayon, no pyo3), never panics
+//! rand_distr), kiddo, rustc-hash and thiserror only (no rayon, no pyo3), never panics
 //! on bad input (every fallible function returns [`Result`]) and holds no global state.
 //!
 //! ## Example: recover a pose from three planes
