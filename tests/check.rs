@@ -3,13 +3,21 @@
 use lidarcal::check::{certify, check, CheckOptions, PreparedPair, Verdict};
 use lidarcal::sim::scenes::{corridor_scene, street_scene, StreetOptions};
 use lidarcal::{Error, FailureKind};
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+/// The default simulated street: reference and target points and the true `reference_from_target`.
+fn default_street() -> (Vec<Point3<f64>>, Vec<Point3<f64>>, Isometry3<f64>) {
+    let scene = street_scene(&StreetOptions::default()).unwrap();
+    (
+        scene.reference.positions(),
+        scene.target.positions(),
+        scene.reference_from_target,
+    )
+}
 
 #[test]
 fn the_truth_is_consistent_and_gross_errors_are_not() {
-    let scene = street_scene(&StreetOptions::default()).unwrap();
-    let (reference, target) = (scene.reference.positions(), scene.target.positions());
-    let truth = scene.reference_from_target;
+    let (reference, target, truth) = default_street();
     let options = CheckOptions::default();
     let report = check(&reference, &target, &truth, &options).unwrap();
     assert_eq!(report.verdict, Verdict::Consistent, "{report}");
@@ -30,9 +38,7 @@ fn the_truth_is_consistent_and_gross_errors_are_not() {
 
 #[test]
 fn a_prepared_pair_reports_what_check_reports_at_every_pose() {
-    let scene = street_scene(&StreetOptions::default()).unwrap();
-    let (reference, target) = (scene.reference.positions(), scene.target.positions());
-    let truth = scene.reference_from_target;
+    let (reference, target, truth) = default_street();
     let options = CheckOptions::default();
     let pair = PreparedPair::new(&reference, &target, &options).unwrap();
     let shifted = Translation3::new(0.0, 0.0, 0.25) * truth;
@@ -56,9 +62,7 @@ fn a_prepared_pair_reports_what_check_reports_at_every_pose() {
 
 #[test]
 fn a_pose_whose_neighbour_fits_more_points_is_flagged_by_its_agreement_gain() {
-    let scene = street_scene(&StreetOptions::default()).unwrap();
-    let (reference, target) = (scene.reference.positions(), scene.target.positions());
-    let truth = scene.reference_from_target;
+    let (reference, target, truth) = default_street();
     let options = CheckOptions::default();
     let at_truth = check(&reference, &target, &truth, &options).unwrap();
     assert!(
