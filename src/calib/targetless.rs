@@ -1420,10 +1420,7 @@ pub fn calibrate_targetless(
             break;
         }
         polished_pairs += 1;
-        let a = match top_polished {
-            Some(a) => Some(a),
-            None => polish(&top),
-        };
+        let a = top_polished.or_else(|| polish(&top));
         match (a, polish(&v)) {
             (Some(a), Some(b))
                 if same_pose(&a.pose, &b.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) =>
