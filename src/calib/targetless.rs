@@ -42,6 +42,13 @@
 //!    180-degree turn of some streets; the violations reject it. The best score of a pose more
 //!    than 2 degrees or 30 cm away is the second best; when it reaches [`AMBIGUITY_RATIO`] of the
 //!    best after both are polished, the result is refused as ambiguous (or flagged).
+//!    **Symmetry probes**: the hypotheses never enumerate a scene's symmetries on purpose, and
+//!    when the two sensors' fields of view differ the truth can rank below its own mirror image
+//!    and never be verified (a corridor or a room is the same box turned half a turn about its
+//!    axis: floor onto ceiling, walls swapped). So the best pose is also turned half a turn about
+//!    each axis of the largest reference planes (normals, and the lines two of them share) through
+//!    the reference centroid; each turn is settled by ICP and scored, and one that comes within
+//!    [`AMBIGUITY_RATIO`] of the best makes the result ambiguous.
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the
@@ -170,6 +177,14 @@ pub const SCORE_MARGIN: f64 = 0.02;
 /// Pairs of the best pose and a close contender polished by the full ICP before the result is
 /// called ambiguous or not (see the verification in [`calibrate_targetless`]).
 pub const MAX_POLISHED: usize = 4;
+/// Largest reference planes whose normals (and the lines they share) give the half turns of
+/// [`half_turns`].
+const SYMMETRY_PLANES: usize = 3;
+/// Two planes share a line for [`half_turns`] when their normals are at least this far from
+/// parallel (the sine of the angle between them, ~12 degrees).
+const MIN_AXIS_NORM: f64 = 0.2;
+/// Axes closer than this (the cosine of 10 degrees) are one.
+const SAME_AXIS_COSINE: f64 = 0.985;
 /// Default of [`TargetlessOptions::challenger_range`].
 pub const CHALLENGER_RANGE: f64 = 2.0;
 /// A challenger (beyond `max_translation`) makes the result ambiguous when it scores at least
@@ -1177,6 +1192,64 @@ struct Verified {
     score: f64,
 }
 
+/// Unit directions of the lines the [`SYMMETRY_PLANES`] largest reference planes share, two by two
+/// (planes at least ~12 degrees from parallel; directions within 10 degrees are one).
+fn shared_lines(features: &[PlaneFeature]) -> Vec<Vector3<f64>> {
+    let normals: Vec<Vector3<f64>> = features
+        .iter()
+        .take(SYMMETRY_PLANES)
+        .map(|f| f.plane.normal.into_inner())
+        .collect();
+    let mut lines: Vec<Vector3<f64>> = Vec::new();
+    for (i, a) in normals.iter().enumerate() {
+        for b in normals.iter().skip(i + 1) {
+            let line = a.cross(b);
+            let norm = line.norm();
+            if norm > MIN_AXIS_NORM
+                && lines
+                    .iter()
+                    .all(|l| (line.dot(l) / norm).abs() < SAME_AXIS_COSINE)
+            {
+                lines.push(line / norm);
+            }
+        }
+    }
+    lines
+}
+
+/// Half turns about the axes of the largest reference planes (their normals and the lines two of
+/// them share, [`SYMMETRY_PLANES`] planes), each through the centroid of the reference points:
+/// the symmetries a corridor, a room or a box would have. A corridor turned about its axis is the
+/// same box (floor onto ceiling, walls swapped), and when the two sensors' fields of view differ
+/// the hypotheses of the truth rank below those of the flip and may never be verified: a 16-beam
+/// unit turned upside down put 80 % of its points near the 32-beam reference, the truth 61 %.
+/// Each turn, applied to the best pose and settled by ICP, is one more runner-up.
+fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> Vec<Isometry3<f64>> {
+    let mut axes: Vec<Vector3<f64>> = Vec::new();
+    let normals = features
+        .iter()
+        .take(SYMMETRY_PLANES)
+        .map(|f| f.plane.normal.into_inner());
+    for a in normals.chain(shared_lines(features)) {
+        if axes.iter().all(|b| a.dot(b).abs() < SAME_AXIS_COSINE) {
+            axes.push(a);
+        }
+    }
+    let centre = points
+        .iter()
+        .fold(Vector3::zeros(), |sum, p| sum + p.coords)
+        / points.len().max(1) as f64;
+    axes.iter()
+        .map(|axis| {
+            let rotation = UnitQuaternion::from_axis_angle(
+                &nalgebra::Unit::new_unchecked(*axis),
+                std::f64::consts::PI,
+            );
+            Isometry3::from_parts(Translation3::from(centre - rotation * centre), rotation)
+        })
+        .collect()
+}
+
 /// Indices and scores of the verified hypotheses, best first (ties keep the enumeration order).
 fn rank(verified: &[Option<Verified>]) -> Vec<(usize, f64)> {
     let mut ranked: Vec<(usize, f64)> = verified
@@ -1492,7 +1565,6 @@ pub fn calibrate_targetless(
             ),
         ));
     }
-    let second_score = runner_up.map_or(0.0, |r| r.score.max(0.0));
     // The agreement is a share of the sampled target points: two poses whose scores differ by
     // less than one standard error of that share are not told apart by the verification,
     // whatever the ratio of their scores (near zero, where free-space violations eat the
@@ -1501,8 +1573,25 @@ pub fn calibrate_targetless(
         let (a, n) = (top.agreement.clamp(0.0, 1.0), full[0].len().max(1) as f64);
         (a * (1.0 - a) / n).sqrt()
     };
-    let ambiguous = runner_up
-        .is_some_and(|r| r.score >= ratio(&r) * best_score || best_score - r.score < resolution);
+    let ties = |r: &Verified| r.score >= ratio(r) * best_score || best_score - r.score < resolution;
+    let mut ambiguous = runner_up.is_some_and(|r| ties(&r));
+    if !ambiguous {
+        // The scene's own half-turn symmetries: a rival the hypotheses may not have reached.
+        let settle = |pose: &Isometry3<f64>| {
+            icp_then_score(pose, &screen_pair, &quick)
+                .and_then(|v| icp_then_score(&v.pose, &short, &full))
+        };
+        if let Some(rival) = half_turns(&reference_ds.features, &reference_ds.points)
+            .into_iter()
+            .filter_map(|turn| settle(&(turn * polished)))
+            .filter(|v| !same_pose(&v.pose, &polished, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+            .find(|v| ties(v))
+        {
+            runner_up = Some(rival);
+            ambiguous = true;
+        }
+    }
+    let second_score = runner_up.map_or(0.0, |r| r.score.max(0.0));
     // Refused after the observability check below, whose reason is the more fundamental one
     // (a corridor is ambiguous along its axis because nothing constrains that direction).
     let ambiguity = (ambiguous && options.refuse_ambiguous).then(|| {
@@ -1800,6 +1889,30 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn half_turns_are_the_box_symmetries_about_the_centroid() {
+        // A floor and two walls 60 degrees apart: three normals and three shared lines, of which
+        // the floor's normal and the walls' shared line (vertical) are one axis.
+        let feature = |normal: Vector3<f64>| PlaneFeature {
+            plane: Plane::new(normal, 1.0).unwrap(),
+            voxels: Vec::new(),
+            centroid: Point3::origin(),
+            extent: [1.0, 1.0],
+        };
+        let wall = Vector3::new(60f64.to_radians().cos(), 60f64.to_radians().sin(), 0.0);
+        let features = [feature(Vector3::z()), feature(Vector3::x()), feature(wall)];
+        assert_eq!(shared_lines(&features).len(), 3);
+        let points = [Point3::new(1.0, 2.0, 0.0), Point3::new(3.0, 0.0, 2.0)];
+        let turns = half_turns(&features, &points);
+        assert_eq!(turns.len(), 5);
+        let centre = Point3::new(2.0, 1.0, 1.0);
+        for turn in &turns {
+            assert!((turn.rotation.angle() - std::f64::consts::PI).abs() < 1e-9);
+            assert!((turn * centre - centre).norm() < 1e-9);
+            assert!((turn * turn).translation.vector.norm() < 1e-9);
+        }
+    }
 
     #[test]
     fn deduplicate_equals_comparing_with_every_kept_pose() {
