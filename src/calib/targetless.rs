@@ -1192,26 +1192,34 @@ struct Verified {
     score: f64,
 }
 
-/// Unit directions of the lines the [`SYMMETRY_PLANES`] largest reference planes share, two by two
-/// (planes at least ~12 degrees from parallel; directions within 10 degrees are one).
-fn shared_lines(features: &[PlaneFeature]) -> Vec<Vector3<f64>> {
-    let normals: Vec<Vector3<f64>> = features
+/// Adds the direction of `a` to `axes` unless it is too short (a cross product of two planes
+/// within ~12 degrees of parallel, [`MIN_AXIS_NORM`]) or within 10 degrees of one already there.
+fn add_axis(axes: &mut Vec<Vector3<f64>>, a: Vector3<f64>) {
+    let norm = a.norm();
+    if norm > MIN_AXIS_NORM
+        && axes
+            .iter()
+            .all(|b| (a.dot(b) / norm).abs() < SAME_AXIS_COSINE)
+    {
+        axes.push(a / norm);
+    }
+}
+
+/// Unit normals of the [`SYMMETRY_PLANES`] largest reference planes.
+fn largest_normals(features: &[PlaneFeature]) -> Vec<Vector3<f64>> {
+    features
         .iter()
         .take(SYMMETRY_PLANES)
         .map(|f| f.plane.normal.into_inner())
-        .collect();
-    let mut lines: Vec<Vector3<f64>> = Vec::new();
+        .collect()
+}
+
+/// Unit directions of the lines planes of these `normals` share, two by two ([`add_axis`]).
+fn shared_lines(normals: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
+    let mut lines = Vec::new();
     for (i, a) in normals.iter().enumerate() {
         for b in normals.iter().skip(i + 1) {
-            let line = a.cross(b);
-            let norm = line.norm();
-            if norm > MIN_AXIS_NORM
-                && lines
-                    .iter()
-                    .all(|l| (line.dot(l) / norm).abs() < SAME_AXIS_COSINE)
-            {
-                lines.push(line / norm);
-            }
+            add_axis(&mut lines, a.cross(b));
         }
     }
     lines
@@ -1225,15 +1233,10 @@ fn shared_lines(features: &[PlaneFeature]) -> Vec<Vector3<f64>> {
 /// unit turned upside down put 80 % of its points near the 32-beam reference, the truth 61 %.
 /// Each turn, applied to the best pose and settled by ICP, is one more runner-up.
 fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> Vec<Isometry3<f64>> {
-    let mut axes: Vec<Vector3<f64>> = Vec::new();
-    let normals = features
-        .iter()
-        .take(SYMMETRY_PLANES)
-        .map(|f| f.plane.normal.into_inner());
-    for a in normals.chain(shared_lines(features)) {
-        if axes.iter().all(|b| a.dot(b).abs() < SAME_AXIS_COSINE) {
-            axes.push(a);
-        }
+    let normals = largest_normals(features);
+    let mut axes = Vec::new();
+    for a in normals.iter().copied().chain(shared_lines(&normals)) {
+        add_axis(&mut axes, a);
     }
     let centre = points
         .iter()
@@ -1902,7 +1905,7 @@ mod tests {
         };
         let wall = Vector3::new(60f64.to_radians().cos(), 60f64.to_radians().sin(), 0.0);
         let features = [feature(Vector3::z()), feature(Vector3::x()), feature(wall)];
-        assert_eq!(shared_lines(&features).len(), 3);
+        assert_eq!(shared_lines(&largest_normals(&features)).len(), 3);
         let points = [Point3::new(1.0, 2.0, 0.0), Point3::new(3.0, 0.0, 2.0)];
         let turns = half_turns(&features, &points);
         assert_eq!(turns.len(), 5);
