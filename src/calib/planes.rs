@@ -39,7 +39,8 @@
 //!    the other cloud, must land mostly next to inliers of their partner plane
 //!    ([`MIN_PLANE_AGREEMENT`] of those that land near the other cloud): a pavement or kerb taken
 //!    for the ground in one cloud only fits the three planes, not the scene, and is refused. Then
-//!    the pose passes through [`crate::check`] (options [`CheckOptions::fitted`]).
+//!    the pose passes through [`crate::check`] ([`PlanarOptions::check`], by default
+//!    [`CheckOptions::fitted`]).
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
