@@ -5,7 +5,9 @@
 //! * [`calibrate`] runs one method, or for [`Method::Auto`] the corner method, the targetless plane
 //!   matching and (when both clouds carry intensity) the taped poles. Every result has passed
 //!   [`crate::check`]; `auto` keeps the one with the best certificate (agreement less free-space
-//!   violations) and refuses with [`FailureKind::InconsistentMethods`] when two certified results
+//!   violations), or the earliest method whose pose is the best's within what the checks detect
+//!   (the corner method's exact pose over a targetless one 1 cm away that scores 0.01 higher), and
+//!   refuses with [`FailureKind::InconsistentMethods`] when two certified results
 //!   disagree beyond their tolerance and their certificates are within [`AUTO_MARGIN`]. A method
 //!   that fails with [`Error::Calibration`] is skipped (its reason and kind are kept for the error
 //!   when none succeeds); malformed input is returned at once.
@@ -50,7 +52,8 @@ use crate::{Error, FailureKind, Result};
 pub const AGREEMENT_DISTANCE: f64 = 0.25;
 
 /// [`Method::Auto`] prefers the earlier method (corner, targetless, poles) when its certificate
-/// score is within this of the best.
+/// score is within this of the best (or its pose within the checks' detectable error of the
+/// best's).
 pub const AUTO_TIE: f64 = 0.01;
 
 /// When two methods pass the check but disagree beyond their tolerance, [`Method::Auto`] keeps
@@ -318,11 +321,25 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     // the agreement comes from the clouds alone, so the reports compare directly).
     let reports: Vec<&CheckReport> = results.iter().map(Calibration::check).collect();
     let scores: Vec<f64> = reports.iter().map(|r| certificate_score(r)).collect();
-    let best = scores.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let pick = scores
-        .iter()
-        .position(|s| *s >= best - options.auto_tie)
+    // Whether results `i` and `j` differ by more than either check can detect.
+    let disagree = |i: usize, j: usize| {
+        let (angle, distance) = pose_error(
+            results[i].reference_from_target(),
+            results[j].reference_from_target(),
+        );
+        let (a, b) = (reports[i], reports[j]);
+        angle > a.detectable_rotation.max(b.detectable_rotation)
+            || distance > a.detectable_translation.max(b.detectable_translation)
+    };
+    // The earliest method (the one made for the scene) whose score ties the best, or whose pose
+    // is the best's within what the checks detect: a targetless pose 1 cm from the corner
+    // method's exact one can score 0.01 higher on the same corner.
+    let top = (0..scores.len())
+        .max_by(|&a, &b| scores[a].total_cmp(&scores[b]).then(b.cmp(&a)))
         .unwrap_or(0);
+    let pick = (0..scores.len())
+        .find(|&i| scores[i] >= scores[top] - options.auto_tie || !disagree(i, top))
+        .unwrap_or(top);
     for (i, other) in results.iter().enumerate() {
         let (chosen, rival) = (reports[pick], reports[i]);
         let (angle, distance) = pose_error(
@@ -333,8 +350,7 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
         let translation_tolerance = chosen
             .detectable_translation
             .max(rival.detectable_translation);
-        let disagree = angle > rotation_tolerance || distance > translation_tolerance;
-        if disagree && scores[pick] - scores[i] < options.auto_margin {
+        if disagree(pick, i) && scores[pick] - scores[i] < options.auto_margin {
             return Err(Error::calibration(
                 FailureKind::InconsistentMethods,
                 format!(
