@@ -41,14 +41,21 @@
 //!    points that land in space the other sensor saw through). Point agreement alone prefers the
 //!    180-degree turn of some streets; the violations reject it. The best score of a pose more
 //!    than 2 degrees or 30 cm away is the second best; when it reaches [`AMBIGUITY_RATIO`] of the
-//!    best after both are polished, the result is refused as ambiguous (or flagged).
+//!    best after both are polished, the result is refused as ambiguous (or flagged) unless the
+//!    check ([`crate::check`]) passes the best and rules the rival out: a rival turned at least
+//!    10 degrees from the best whose overlap leaves a direction unconstrained (a half turn whose
+//!    agreement comes from sliding along a wall) or that puts more points into free space than
+//!    the check allows is no rival, and the next close contender is examined instead. A rival
+//!    the check refuses only because its local re-alignment moves it (a pose not settled) still
+//!    counts, and so does a slide of the best pose itself.
 //!    **Symmetry probes**: the hypotheses never enumerate a scene's symmetries on purpose, and
 //!    when the two sensors' fields of view differ the truth can rank below its own mirror image
 //!    and never be verified (a corridor or a room is the same box turned half a turn about its
 //!    axis: floor onto ceiling, walls swapped). So the best pose is also turned half a turn about
 //!    each axis of the largest reference planes (normals, and the lines two of them share) through
 //!    the reference centroid; each turn is settled by ICP and scored, and one that comes within
-//!    [`AMBIGUITY_RATIO`] of the best makes the result ambiguous.
+//!    [`AMBIGUITY_RATIO`] of the best (and is not ruled out by the check) makes the result
+//!    ambiguous.
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the
@@ -102,7 +109,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion
 
 use super::planes::estimate_threshold;
 use super::{Stopwatch, Timings};
-use crate::check::{certify, CheckOptions, CheckReport, PreparedPair};
+use crate::check::{certify, CheckOptions, CheckReport, PreparedPair, Verdict};
 use crate::error::{ensure_finite, ensure_positive, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::{rotation_angle, Plane};
@@ -1192,6 +1199,10 @@ struct Verified {
     score: f64,
 }
 
+/// A rival the check rules out is dismissed only when it is turned at least this far from the best
+/// pose (radians, 10 degrees); see `calibrate_targetless`.
+const RULED_OUT_TURN: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
 /// Adds the direction of `a` to `axes` unless it is too short (a cross product of two planes
 /// within ~12 degrees of parallel, [`MIN_AXIS_NORM`]) or within 10 degrees of one already there.
 fn add_axis(axes: &mut Vec<Vector3<f64>>, a: Vector3<f64>) {
@@ -1262,6 +1273,68 @@ fn rank(verified: &[Option<Verified>]) -> Vec<(usize, f64)> {
         .collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
     ranked
+}
+
+/// The best of verified poses (`pool`, best first, each with its hypothesis) and its closest
+/// distinct rival. A close runner-up may be the same answer, not polished as far: both get the
+/// full ICP (`polish`) and are scored again before the result is called ambiguous. When the two
+/// settle on one pose, the next distinct contender is polished in turn (up to [`MAX_POLISHED`]):
+/// in a street turned by half a turn the two best hypotheses can be the same flip 0.4 m apart,
+/// and the truth beyond max_translation only third. A best pose beyond max_translation (not
+/// `within`) is always polished against the best pose within range, and only poses within range
+/// challenge it.
+fn settle_best(
+    pool: &[(Candidate, Verified)],
+    within: &impl Fn(&Verified) -> bool,
+    polish: &impl Fn(&Verified) -> Option<Verified>,
+) -> Option<(Candidate, Verified, Option<Verified>)> {
+    let &(winner, mut top) = pool.first()?;
+    let mut top_polished = None;
+    let mut runner_up = None;
+    let mut polished_pairs = 0;
+    for &(_, v) in pool {
+        // Against a challenger that screened best, the best pose within range.
+        let eligible = within(&v) || (within(&top) && v.score >= AMBIGUITY_RATIO * top.score);
+        if !eligible || same_pose(&v.pose, &top.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
+            continue;
+        }
+        let close = !within(&top) || v.score >= AMBIGUITY_RATIO * top.score;
+        if !close || polished_pairs == MAX_POLISHED {
+            runner_up = Some(v);
+            break;
+        }
+        polished_pairs += 1;
+        let a = top_polished.or_else(|| polish(&top));
+        match (a, polish(&v)) {
+            (Some(a), Some(b))
+                if same_pose(&a.pose, &b.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) =>
+            {
+                top = if b.score > a.score { b } else { a };
+                top_polished = Some(top);
+            }
+            (Some(a), Some(b)) => {
+                (top, runner_up) = if b.score > a.score {
+                    (b, Some(a))
+                } else {
+                    (a, Some(b))
+                };
+                break;
+            }
+            (Some(a), None) => {
+                (top, runner_up) = (a, Some(v));
+                break;
+            }
+            (None, Some(b)) => {
+                top = b;
+                top_polished = Some(b);
+            }
+            (None, None) => {
+                runner_up = Some(v);
+                break;
+            }
+        }
+    }
+    Some((winner, top, runner_up))
 }
 
 fn mapped(points: &[Point3<f64>], pose: &Isometry3<f64>) -> Vec<Point3<f64>> {
@@ -1442,20 +1515,15 @@ pub fn calibrate_targetless(
     #[cfg(not(feature = "parallel"))]
     let verified: Vec<Option<Verified>> = kept.iter().map(verify_one).collect();
     let ranked = rank(&verified);
-    let Some(&(best, _)) = ranked.first() else {
-        return Err(Error::calibration(
-            FailureKind::NoAgreement,
-            "no plane hypothesis brings the clouds into agreement (ICP found no overlap)",
-        ));
-    };
-    let (Some(Some(mut top)), Some(&winner)) = (
-        verified.get(best),
-        kept.get(best).and_then(|(k, _)| chosen.get(*k)),
-    ) else {
-        return Err(Error::Numerical(
-            "verification lost its best hypothesis".into(),
-        ));
-    };
+    // The verified poses best first, each with the hypothesis it grew from.
+    let pool: Vec<(Candidate, Verified)> = ranked
+        .iter()
+        .filter_map(|&(k, _)| {
+            let v = verified.get(k).copied().flatten()?;
+            let c = kept.get(k).and_then(|(i, _)| chosen.get(*i)).copied()?;
+            Some((c, v))
+        })
+        .collect();
     // A challenger beyond max_translation competes only when it comes close to the best: the
     // user's bound on the rig already rules such poses out, and a corner turned by half a turn
     // 6-9 m away scores 75-90 % of the truth.
@@ -1467,67 +1535,18 @@ pub fn calibrate_targetless(
             CHALLENGER_AMBIGUITY_RATIO
         }
     };
-    // A close runner-up may be the same answer, not polished as far: both get the full ICP
-    // and are scored again before the result is called ambiguous. When the two settle on one
-    // pose, the next distinct contender is polished in turn (up to [`MAX_POLISHED`]): in a
-    // street turned by half a turn the two best hypotheses can be the same flip 0.4 m apart,
-    // and the truth beyond max_translation only third. A challenger on top is always polished
-    // against the best pose within range before it refuses the calibration.
     let polish = |v: &Verified| {
         point_to_plane_icp(&surface, &target_ds.points, &v.pose, &options.icp_options)
             .ok()
             .map(|r| score(r.pose, &full))
     };
-    let mut top_polished = None;
-    let mut runner_up = None;
-    let mut polished_pairs = 0;
-    for v in ranked
-        .iter()
-        .filter_map(|&(k, _)| verified.get(k).copied().flatten())
-    {
-        // Against a challenger that screened best, the best pose within range.
-        let eligible = within(&v) || (within(&top) && v.score >= AMBIGUITY_RATIO * top.score);
-        if !eligible || same_pose(&v.pose, &top.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
-            continue;
-        }
-        let close = !within(&top) || v.score >= AMBIGUITY_RATIO * top.score;
-        if !close || polished_pairs == MAX_POLISHED {
-            runner_up = Some(v);
-            break;
-        }
-        polished_pairs += 1;
-        let a = top_polished.or_else(|| polish(&top));
-        match (a, polish(&v)) {
-            (Some(a), Some(b))
-                if same_pose(&a.pose, &b.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) =>
-            {
-                top = if b.score > a.score { b } else { a };
-                top_polished = Some(top);
-            }
-            (Some(a), Some(b)) => {
-                (top, runner_up) = if b.score > a.score {
-                    (b, Some(a))
-                } else {
-                    (a, Some(b))
-                };
-                break;
-            }
-            (Some(a), None) => {
-                (top, runner_up) = (a, Some(v));
-                break;
-            }
-            (None, Some(b)) => {
-                top = b;
-                top_polished = Some(b);
-            }
-            (None, None) => {
-                runner_up = Some(v);
-                break;
-            }
-        }
-    }
-    let (polished, best_score) = (top.pose, top.score);
-    if best_score <= 0.0 {
+    let Some((winner, top, mut runner_up)) = settle_best(&pool, &within, &polish) else {
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            "no plane hypothesis brings the clouds into agreement (ICP found no overlap)",
+        ));
+    };
+    if top.score <= 0.0 {
         return Err(Error::calibration(
             FailureKind::NoAgreement,
             format!(
@@ -1540,14 +1559,16 @@ pub fn calibrate_targetless(
             ),
         ));
     }
-    let distance = polished.translation.vector.norm();
+    let distance = top.pose.translation.vector.norm();
     if distance > options.max_translation {
         let best_within = runner_up
             .filter(within)
             .map_or(f64::NEG_INFINITY, |r| r.score);
         // A challenger that fails the check itself says only that nothing fits (a cloud with
-        // no real structure): that failure is the reason.
-        if let Err(e) = certify(reference, target, &polished, &options.check) {
+        // no real structure): that failure is the reason. (Falling back to the best pose within
+        // range then was tried: in 1000 adversarial scenes it solved two corners and returned
+        // one pole scene 1.6 m off.)
+        if let Err(e) = certify(reference, target, &top.pose, &options.check) {
             return Err(e.context(&format!(
                 "the best pose puts the target {distance:.2} m away, beyond max_translation, \
                  and fails the check as well"
@@ -1557,9 +1578,10 @@ pub fn calibrate_targetless(
             FailureKind::OutOfRange,
             format!(
                 "the clouds agree best with the target {distance:.2} m from the reference, beyond \
-                 max_translation ({:.2} m; score {best_score:.3}, best within range {}): the \
-                 sensors seem further apart than allowed; raise max_translation if they are",
+                 max_translation ({:.2} m; score {:.3}, best within range {}): the sensors seem \
+                 further apart than allowed; raise max_translation if they are",
                 options.max_translation,
+                top.score,
                 if best_within.is_finite() {
                     format!("{best_within:.3}")
                 } else {
@@ -1568,6 +1590,7 @@ pub fn calibrate_targetless(
             ),
         ));
     }
+    let (polished, best_score) = (top.pose, top.score);
     // The agreement is a share of the sampled target points: two poses whose scores differ by
     // less than one standard error of that share are not told apart by the verification,
     // whatever the ratio of their scores (near zero, where free-space violations eat the
@@ -1577,20 +1600,84 @@ pub fn calibrate_targetless(
         (a * (1.0 - a) / n).sqrt()
     };
     let ties = |r: &Verified| r.score >= ratio(r) * best_score || best_score - r.score < resolution;
-    let mut ambiguous = runner_up.is_some_and(|r| ties(&r));
+    // The check's preparation of the two clouds (most of its work), made at most once for every
+    // pose checked from here on.
+    let prepared = OnceCell::new();
+    let prepare = || -> Result<&PreparedPair> {
+        if let Some(pair) = prepared.get() {
+            return Ok(pair);
+        }
+        let pair = PreparedPair::new(reference, target, &options.check)?;
+        Ok(prepared.get_or_init(|| pair))
+    };
+    // A rival the check rules out is no rival when the best pose passes it: the rival's overlap
+    // leaves a direction unconstrained (a half turn whose agreement comes from sliding along a
+    // wall) or puts points into free space. A rival that fails only because the check's local
+    // re-alignment moves it is not settled, and still counts; so does a slide of the best pose
+    // itself (turned by less than RULED_OUT_TURN): a corridor turned upside down, the best pose
+    // of one held-out scene, had only its own slides as rivals, and they were the only sign.
+    let top_consistent = OnceCell::new();
+    let rules_out = |r: &Verified| -> Result<bool> {
+        if pose_error(&r.pose, &polished).0 < RULED_OUT_TURN {
+            return Ok(false);
+        }
+        let pair = prepare()?;
+        if !*top_consistent.get_or_init(|| {
+            pair.check(&polished)
+                .is_ok_and(|c| c.verdict == Verdict::Consistent)
+        }) {
+            return Ok(false);
+        }
+        let c = pair.check(&r.pose)?;
+        Ok(match c.verdict {
+            Verdict::Consistent => false,
+            Verdict::Unverifiable => true,
+            Verdict::Inconsistent => {
+                c.violations.max(c.reverse_violations) > options.check.max_violations
+                    || c.agreement.min(c.reverse_agreement) < options.check.min_agreement
+            }
+        })
+    };
+    let rival = |r: &Verified| -> Result<bool> { Ok(ties(r) && !rules_out(r)?) };
+    let mut ambiguous = false;
+    if let Some(r) = runner_up {
+        if rival(&r)? {
+            ambiguous = true;
+        } else if ties(&r) {
+            // Ruled out: the next distinct contenders that tie are checked in turn.
+            let mut seen = vec![polished, r.pose];
+            for v in ranked
+                .iter()
+                .filter_map(|&(k, _)| verified.get(k).copied().flatten())
+                .filter(|v| ties(v))
+            {
+                if seen
+                    .iter()
+                    .any(|p| same_pose(p, &v.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+                {
+                    continue;
+                }
+                if seen.len() > MAX_POLISHED || rival(&v)? {
+                    (ambiguous, runner_up) = (true, Some(v));
+                    break;
+                }
+                seen.push(v.pose);
+            }
+        }
+    }
     if !ambiguous {
         // The scene's own half-turn symmetries: a rival the hypotheses may not have reached.
         let settle = |pose: &Isometry3<f64>| {
             icp_then_score(pose, &screen_pair, &quick)
                 .and_then(|v| icp_then_score(&v.pose, &short, &full))
         };
-        if let Some(rival) = half_turns(&reference_ds.features, &reference_ds.points)
+        if let Some(turned) = half_turns(&reference_ds.features, &reference_ds.points)
             .into_iter()
             .filter_map(|turn| settle(&(turn * polished)))
             .filter(|v| !same_pose(&v.pose, &polished, DISTINCT_ANGLE, DISTINCT_DISTANCE))
-            .find(|v| ties(v))
+            .find(|v| rival(v).unwrap_or(true))
         {
-            runner_up = Some(rival);
+            runner_up = Some(turned);
             ambiguous = true;
         }
     }
@@ -1673,16 +1760,6 @@ pub fn calibrate_targetless(
     };
     let mut pose = icp.map_or(plane_pose, |r| r.pose);
     let mut icp = icp;
-    // The check's preparation of the two clouds (most of its work), made at most once for every
-    // pose checked from here on.
-    let prepared = OnceCell::new();
-    let prepare = || -> Result<&PreparedPair> {
-        if let Some(pair) = prepared.get() {
-            return Ok(pair);
-        }
-        let pair = PreparedPair::new(reference, target, &options.check)?;
-        Ok(prepared.get_or_init(|| pair))
-    };
     // (Not for a result about to be refused as ambiguous: that refusal stands either way.)
     if let Some(main) = icp.filter(|_| ambiguity.is_none()) {
         // Hypotheses within DISTINCT of the winner were never polished on their own; when one
@@ -1892,6 +1969,50 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn settle_best_polishes_a_close_rival_and_merges_one_that_settles_on_the_best() {
+        let at = |x: f64, score: f64| {
+            let pose = Isometry3::translation(x, 0.0, 0.0);
+            let c = Candidate {
+                pose,
+                free: None,
+                support: 0.0,
+                sweep: false,
+            };
+            let v = Verified {
+                pose,
+                agreement: score,
+                violations: [0.0; 2],
+                score,
+            };
+            (c, v)
+        };
+        let within = |v: &Verified| v.pose.translation.vector.norm() <= 5.0;
+        // A rival 1 m away at 90 % is polished and stays distinct: it is the runner-up.
+        let pool = [at(0.0, 1.0), at(1.0, 0.9), at(2.0, 0.5)];
+        let stay = |v: &Verified| Some(*v);
+        let (_, top, runner) = settle_best(&pool, &within, &stay).unwrap();
+        assert_eq!(top.score, 1.0);
+        assert_eq!(runner.map(|r| r.score), Some(0.9));
+        // When the rival settles onto the best (polishing moves 1 m to 0 m) they are one answer,
+        // and the next contender, at 50 %, is the runner-up without being polished.
+        let onto_best = |v: &Verified| {
+            let x = v.pose.translation.vector.x;
+            Some(if x < 1.5 { at(0.0, v.score).1 } else { *v })
+        };
+        let (_, top, runner) = settle_best(&pool, &within, &onto_best).unwrap();
+        assert_eq!(top.pose.translation.vector.x, 0.0);
+        assert_eq!(runner.map(|r| r.score), Some(0.5));
+        // A best pose beyond range is always polished against the best within range, and the
+        // better after polishing wins.
+        let pool = [at(7.0, 1.0), at(1.0, 0.5)];
+        let lift = |v: &Verified| Some(at(v.pose.translation.vector.x, v.score * 3.0).1);
+        let (_, top, runner) = settle_best(&pool, &within, &lift).unwrap();
+        assert_eq!(top.pose.translation.vector.x, 7.0);
+        assert_eq!(runner.map(|r| r.pose.translation.vector.x), Some(1.0));
+        assert!(settle_best(&[], &within, &stay).is_none());
+    }
 
     #[test]
     fn half_turns_are_the_box_symmetries_about_the_centroid() {
