@@ -330,6 +330,20 @@ impl CheckReport {
     pub fn is_consistent(&self) -> bool {
         self.verdict == Verdict::Consistent
     }
+
+    /// The refusal a calibration returning this pose reports: `None` when consistent, otherwise
+    /// `Error::Calibration` of [`CheckReport::failure`] naming the verdict and its reason.
+    pub fn refusal(&self) -> Option<Error> {
+        self.failure.map(|kind| {
+            Error::calibration(
+                kind,
+                format!(
+                    "the result did not pass the check ({}): {}",
+                    self.verdict, self.reason
+                ),
+            )
+        })
+    }
 }
 
 impl std::fmt::Display for CheckReport {
@@ -562,15 +576,9 @@ impl PreparedPair {
     /// [`certify`] on the prepared pair.
     pub fn certify(&self, reference_from_target: &Isometry3<f64>) -> Result<CheckReport> {
         let report = self.check(reference_from_target)?;
-        match report.failure {
+        match report.refusal() {
             None => Ok(report),
-            Some(kind) => Err(Error::calibration(
-                kind,
-                format!(
-                    "the result did not pass the check ({}): {}",
-                    report.verdict, report.reason
-                ),
-            )),
+            Some(e) => Err(e),
         }
     }
 

@@ -59,6 +59,14 @@
 //!    indistinguishable and the calibration is refused. Two vertical poles on flat ground with no
 //!    other structure are genuinely symmetric under the swap (a 180 deg turn about the vertical
 //!    between them); tilted poles, the ground seen from two places and any other structure break it.
+//! 7. **Settling and check.** Two near-parallel axes hold the height along them and the tilt only
+//!    loosely (4-8 cm and up to 1.5 deg off in adversarial scenes with 2-3 cm noise), which the
+//!    check ([`crate::check`]) then refuses. When it does, the check's local re-alignment on the
+//!    whole scene, started from the pole pose, is taken instead when it moves it by at most [`SCENE_REFINE_ANGLE`] and
+//!    [`SCENE_REFINE_DISTANCE`] and every matched pole still lies within [`MAX_POLE_RMSE`] of its
+//!    axis there, and when it passes the check itself (cylinder fits only: a centroid line's
+//!    residuals include the pole's thickness and cannot tell whether the poles still fit). In 1000 adversarial scenes this took the
+//!    solvable pole scenes solved from 54 to 74, none wrong. A pole pose that passes is kept.
 //!
 //! # Limits
 //! * The default [`PoleOptions::cluster_tolerance`] (0.5 m) joins the rings of a VLP-16 (2 deg
@@ -92,9 +100,10 @@
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
+use super::targetless::pose_error;
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
-use crate::check::{certify, CheckOptions, CheckReport};
+use crate::check::{CheckOptions, CheckReport, PreparedPair};
 use crate::cluster::{euclidean_clusters_until, Grid};
 use crate::error::{ensure_positive, Error, FailureKind, Result};
 use crate::fit::cylinder::fit_cylinder;
@@ -157,6 +166,11 @@ pub const MAX_POLE_RMSE: f64 = 0.05;
 /// What [`MAX_POLE_RMSE`] allows in addition for [`AxisFit::Line`], whose residuals include the
 /// pole's thickness (metres).
 pub const LINE_FIT_THICKNESS: f64 = 0.2;
+/// The scene's re-alignment of the pole pose is kept only within this rotation (radians, 3
+/// degrees) ...
+pub const SCENE_REFINE_ANGLE: f64 = 3.0 * std::f64::consts::PI / 180.0;
+/// ... and this translation (metres) of it, where the poles still fit ([`MAX_POLE_RMSE`]).
+pub const SCENE_REFINE_DISTANCE: f64 = 0.2;
 /// A further pole matches a mapped pole when their directions are within this angle (radians,
 /// 5 degrees) ...
 pub const MATCH_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
@@ -1135,7 +1149,40 @@ pub fn calibrate_poles(
     let rmse = best.axis_rms;
     let initial = starts[chosen];
     clock.lap("choose");
-    let check = certify(reference, target, &pose, &options.check)?;
+    // The poles hold the pose only as well as a few hundred tape points can: two near-parallel
+    // axes leave the height along them and the tilt loosely held (4-8 cm and up to 1.5 degrees
+    // off in 1000 adversarial scenes with 2-3 cm noise), which the check then refuses. The
+    // scene's surfaces settle those: when the pole pose fails the check, the check's local
+    // re-alignment from it is taken if it stays near it, the poles still lie within
+    // MAX_POLE_RMSE of their axes there and it passes the check (the pole-only pose fits the tape's noise too: at the true pose of noisy units the
+    // RMS is 2-4 cm, not 1-2). A pole pose that passes is kept: on clean scans it is the more
+    // precise (20 simulated scenes: median 2.7 mrad / 1.35 cm against 3.1 mrad / 1.5 cm).
+    let pair = PreparedPair::new(reference, target, &options.check)?;
+    let first = pair.check(&pose)?;
+    let (pose, pole_rmse, check) = match first.refusal() {
+        None => (pose, pole_rmse, first),
+        Some(refused) => {
+            // A centroid line's residuals include the pole's thickness (up to 25 cm allowed):
+            // they cannot tell whether the poles still fit, and the scene then moved one of 20
+            // simulated line-fit results 19 cm along a direction it holds only weakly.
+            if options.axis_fit != AxisFit::Cylinder {
+                return Err(refused);
+            }
+            let aligned = first.aligned;
+            let (angle, distance) = pose_error(&aligned, &pose);
+            if angle > SCENE_REFINE_ANGLE || distance > SCENE_REFINE_DISTANCE {
+                return Err(refused);
+            }
+            let rms = per_pole_rms(&clouds, &best.matches, options.loss, &aligned)?;
+            if !rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE) {
+                return Err(refused);
+            }
+            match pair.check(&aligned)? {
+                c if c.failure.is_none() => (aligned, rms, c),
+                _ => return Err(refused),
+            }
+        }
+    };
     clock.lap("certify");
     Ok(PoleCalibration {
         check,
