@@ -1790,7 +1790,12 @@ pub fn calibrate_targetless(
             &options.icp_options,
         )
         .ok();
-        let chosen = prefer_free_space(main, settled.chain(plane), prepare);
+        // And the verified pose: matched planes that are not the same surface (a box top for
+        // the ground) can pull the plane refinement, and ICP after it, off a verified pose that
+        // kept free space clear.
+        let verified_pose =
+            point_to_plane_fit(&surface, &target_ds.points, &polished, &options.icp_options).ok();
+        let chosen = prefer_free_space(main, settled.chain(plane).chain(verified_pose), prepare);
         pose = chosen.pose;
         icp = Some(chosen);
     }
