@@ -100,8 +100,10 @@ def test_no_wrong_answer(family: str, seed: int) -> None:
 #: Solvable scenes that a method must solve, not only not get wrong, each once refused by it:
 #: targetless corner 36 and 46, whose runner-up (a half turn) the check rules out as unverifiable
 #: or inconsistent while it passes the best pose; pole scenes 44 and 142, whose pole-only pose sat
-#: 5 cm low and 0.1-0.7 deg tilted until the scene settled it.
+#: 5 cm low and 0.1-0.7 deg tilted until the scene settled it; held-out corner 1017, returned 27 cm
+#: low (box tops taken for the ground) until a re-alignment into free space stopped counting.
 MUST_SOLVE = [
+    ("corner", 1017, "targetless"),
     ("corner", 36, "targetless"),
     ("corner", 46, "targetless"),
     ("poles", 44, "poles"),
@@ -117,6 +119,21 @@ def test_solvable_scene_is_solved(family: str, seed: int, method: str) -> None:
     rot, trans = _errors(scene.reference_from_target, np.asarray(result.transform))
     assert rot <= ROT_TOL and trans <= TRANS_TOL, (np.degrees(rot), trans)
     assert result.check.verdict == "consistent"
+
+
+def test_check_does_not_follow_a_realignment_into_free_space() -> None:
+    # The true pose of this 16-beam corner: point-to-plane re-alignment pulls it 28 cm down onto
+    # box tops, where 4 % of the points land in space the other sensor saw through (none here).
+    scene = scenarios.make("corner", 1017)
+    report = lidarcal.check(scene.reference, scene.target, scene.reference_from_target)
+    assert report.verdict == "consistent", report.reason
+    assert "free space" in report.reason
+    assert report.correction_translation_m > 0.2
+    # A pose 1 degree off is still flagged: its re-alignment comes back toward the truth.
+    turned = scene.reference_from_target.copy()
+    c, s = np.cos(np.radians(1.0)), np.sin(np.radians(1.0))
+    turned[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ turned[:3, :3]
+    assert lidarcal.check(scene.reference, scene.target, turned).verdict != "consistent"
 
 
 def test_make_is_deterministic() -> None:
