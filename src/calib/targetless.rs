@@ -53,7 +53,8 @@
 //!    and never be verified (a corridor or a room is the same box turned half a turn about its
 //!    axis: floor onto ceiling, walls swapped). So the best pose is also turned half a turn about
 //!    each axis of the largest reference planes (normals, and the lines two of them share) through
-//!    the reference centroid; each turn is settled by ICP and scored, and one that comes within
+//!    the reference centroid and through its middle along the normals (a room's own centre); each
+//!    turn is settled by ICP and scored, and one that comes within
 //!    [`AMBIGUITY_RATIO`] of the best (and is not ruled out by the check) makes the result
 //!    ambiguous.
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
@@ -1237,31 +1238,72 @@ fn shared_lines(normals: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
 }
 
 /// Half turns about the axes of the largest reference planes (their normals and the lines two of
-/// them share, [`SYMMETRY_PLANES`] planes), each through the centroid of the reference points:
-/// the symmetries a corridor, a room or a box would have. A corridor turned about its axis is the
+/// them share, [`SYMMETRY_PLANES`] planes), each through the centroid of the reference points and
+/// through their middle ([`middle`], when it lies [`DISTINCT_DISTANCE`] or more away): the
+/// symmetries a corridor, a room or a box would have. A corridor turned about its axis is the
 /// same box (floor onto ceiling, walls swapped), and when the two sensors' fields of view differ
 /// the hypotheses of the truth rank below those of the flip and may never be verified: a 16-beam
-/// unit turned upside down put 80 % of its points near the 32-beam reference, the truth 61 %.
-/// Each turn, applied to the best pose and settled by ICP, is one more runner-up.
+/// unit turned upside down put 80 % of its points near the 32-beam reference, the truth 61 %. A
+/// room's own centre is its middle, not the centroid, which leans toward the walls the sensor
+/// sees best: two rooms turned about the vertical came back 180 degrees off while the turns
+/// through the centroid settled metres away. Each turn, applied to the best pose and settled by
+/// ICP, is one more runner-up.
 fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> Vec<Isometry3<f64>> {
     let normals = largest_normals(features);
-    let mut axes = Vec::new();
-    for a in normals.iter().copied().chain(shared_lines(&normals)) {
+    let mut directions = Vec::new();
+    for n in &normals {
+        add_axis(&mut directions, *n);
+    }
+    let mut axes = directions.clone();
+    for a in shared_lines(&normals) {
         add_axis(&mut axes, a);
     }
-    let centre = points
+    let centroid = points
         .iter()
         .fold(Vector3::zeros(), |sum, p| sum + p.coords)
         / points.len().max(1) as f64;
-    axes.iter()
-        .map(|axis| {
-            let rotation = UnitQuaternion::from_axis_angle(
-                &nalgebra::Unit::new_unchecked(*axis),
-                std::f64::consts::PI,
-            );
-            Isometry3::from_parts(Translation3::from(centre - rotation * centre), rotation)
+    let mid = middle(points, &directions, centroid);
+    let mut centres = vec![centroid];
+    if (mid - centroid).norm() >= DISTINCT_DISTANCE {
+        centres.push(mid);
+    }
+    centres
+        .iter()
+        .flat_map(|centre| {
+            axes.iter().map(move |axis| {
+                let rotation = UnitQuaternion::from_axis_angle(
+                    &nalgebra::Unit::new_unchecked(*axis),
+                    std::f64::consts::PI,
+                );
+                Isometry3::from_parts(Translation3::from(centre - rotation * centre), rotation)
+            })
         })
         .collect()
+}
+
+/// `start` moved, along each unit direction in turn, to the midpoint of the 2nd and 98th
+/// percentiles of the points' projections on it: the middle of a room or a corridor along the
+/// normals of its walls, floor and ceiling (exact for orthogonal directions).
+fn middle(
+    points: &[Point3<f64>],
+    directions: &[Vector3<f64>],
+    start: Vector3<f64>,
+) -> Vector3<f64> {
+    let mut centre = start;
+    if points.is_empty() {
+        return centre;
+    }
+    let mut projections = vec![0.0; points.len()];
+    for d in directions {
+        for (value, p) in projections.iter_mut().zip(points) {
+            *value = d.dot(&p.coords);
+        }
+        projections.sort_by(f64::total_cmp);
+        let at = |q: f64| projections[((projections.len() - 1) as f64 * q).round() as usize];
+        let mid = 0.5 * (at(0.02) + at(0.98));
+        centre += d * (mid - d.dot(&centre));
+    }
+    centre
 }
 
 /// Indices and scores of the verified hypotheses, best first (ties keep the enumeration order).
@@ -2017,6 +2059,24 @@ mod tests {
         assert_eq!(top.pose.translation.vector.x, 7.0);
         assert_eq!(runner.map(|r| r.pose.translation.vector.x), Some(1.0));
         assert!(settle_best(&[], &within, &stay).is_none());
+    }
+
+    #[test]
+    fn middle_is_the_centre_of_a_room_seen_mostly_on_one_side() {
+        // Walls at x = 0 and x = 10 (y from 0 to 4): nine points in ten on the near wall.
+        let mut points = Vec::new();
+        for i in 0..1000 {
+            let y = 4.0 * (i % 100) as f64 / 100.0;
+            let x = if i % 10 == 0 { 10.0 } else { 0.0 };
+            points.push(Point3::new(x, y, 1.5));
+        }
+        let centroid = points.iter().fold(Vector3::zeros(), |s, p| s + p.coords) / 1000.0;
+        assert!((centroid.x - 1.0).abs() < 1e-9);
+        let mid = middle(&points, &[Vector3::x(), Vector3::y()], centroid);
+        assert!((mid.x - 5.0).abs() < 1e-9, "{mid}");
+        assert!((mid.y - 1.98).abs() < 0.05, "{mid}");
+        assert_eq!(mid.z, centroid.z);
+        assert_eq!(middle(&[], &[Vector3::x()], centroid), centroid);
     }
 
     #[test]
