@@ -37,9 +37,9 @@
 //!   ([`CheckOptions::max_agreement_gain`]), or too many points violate the free space, or too
 //!   few overlapping points agree. The correction and the agreement gain count only when the
 //!   re-aligned pose puts at most twice as many points, plus one in a hundred, into the other
-//!   sensor's free space as the given pose: on sparse 16-beam corners point-to-plane ICP pulled true poses 8-28 cm
-//!   onto box tops and neighbouring scan rings, where 2-7 % of the points land in space the
-//!   other sensor saw through (the truth: none); the reason then says so.
+//!   sensor's free space as the given pose: on sparse 16-beam corners point-to-plane ICP pulled
+//!   true poses 8-28 cm onto box tops and neighbouring scan rings, where 2-7 % of the points land
+//!   in space the other sensor saw through (the truth: none); the reason then says so.
 //! * [`Verdict::Consistent`]: none of these.
 //!
 //! ```

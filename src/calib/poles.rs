@@ -62,11 +62,12 @@
 //! 7. **Settling and check.** Two near-parallel axes hold the height along them and the tilt only
 //!    loosely (4-8 cm and up to 1.5 deg off in adversarial scenes with 2-3 cm noise), which the
 //!    check ([`crate::check`]) then refuses. When it does, the check's local re-alignment on the
-//!    whole scene, started from the pole pose, is taken instead when it moves it by at most [`SCENE_REFINE_ANGLE`] and
-//!    [`SCENE_REFINE_DISTANCE`] and every matched pole still lies within [`MAX_POLE_RMSE`] of its
-//!    axis there, and when it passes the check itself (cylinder fits only: a centroid line's
-//!    residuals include the pole's thickness and cannot tell whether the poles still fit). In 1000 adversarial scenes this took the
-//!    solvable pole scenes solved from 54 to 74, none wrong. A pole pose that passes is kept.
+//!    whole scene, started from the pole pose, is taken instead when it moves it by at most
+//!    [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`], every matched pole still lies within
+//!    [`MAX_POLE_RMSE`] of its axis there, and it passes the check itself (cylinder fits only: a
+//!    centroid line's residuals include the pole's thickness and cannot tell whether the poles
+//!    still fit). In 1000 adversarial scenes this took the solvable pole scenes solved from 54 to
+//!    74, none wrong. A pole pose that passes is kept.
 //!
 //! # Limits
 //! * The default [`PoleOptions::cluster_tolerance`] (0.5 m) joins the rings of a VLP-16 (2 deg
@@ -1154,9 +1155,10 @@ pub fn calibrate_poles(
     // off in 1000 adversarial scenes with 2-3 cm noise), which the check then refuses. The
     // scene's surfaces settle those: when the pole pose fails the check, the check's local
     // re-alignment from it is taken if it stays near it, the poles still lie within
-    // MAX_POLE_RMSE of their axes there and it passes the check (the pole-only pose fits the tape's noise too: at the true pose of noisy units the
-    // RMS is 2-4 cm, not 1-2). A pole pose that passes is kept: on clean scans it is the more
-    // precise (20 simulated scenes: median 2.7 mrad / 1.35 cm against 3.1 mrad / 1.5 cm).
+    // MAX_POLE_RMSE of their axes there and it passes the check (the pole-only pose fits the
+    // tape's noise too: at the true pose of noisy units the RMS is 2-4 cm, not 1-2). A pole pose
+    // that passes is kept: on clean scans it is the more precise (20 simulated scenes: median
+    // 2.7 mrad / 1.35 cm against 3.1 mrad / 1.5 cm).
     let pair = PreparedPair::new(reference, target, &options.check)?;
     let first = pair.check(&pose)?;
     let (pose, pole_rmse, check) = match first.refusal() {
