@@ -1171,10 +1171,16 @@ fn prefer_free_space<'a>(
     };
     let mut best = main;
     let mut best_judged = None;
+    // Poses already judged: the plane fit and the verified pose are one pose whenever the plane
+    // refinement kept the verified pose, and a check costs as much as the ICP.
+    let mut judged_poses: Vec<Isometry3<f64>> = Vec::new();
     for candidate in candidates {
-        if same_pose(&candidate.pose, &best.pose, SETTLED_ANGLE, SETTLED_DISTANCE) {
+        if same_pose(&candidate.pose, &best.pose, SETTLED_ANGLE, SETTLED_DISTANCE)
+            || judged_poses.contains(&candidate.pose)
+        {
             continue;
         }
+        judged_poses.push(candidate.pose);
         if best_judged.is_none() {
             best_judged = judge(&best.pose);
         }
