@@ -42,10 +42,10 @@ TRANS_TOL = 0.10  # m
 #: down whose only rivals were its own slides along the corridor; it must stay refused now that a
 #: rival the check rules out is dismissed (slides of the best pose are not); corridor 1092 (held
 #: out), a room returned 180 degrees off until the half turns went through its middle too.
-#: Still wrong after the certification work (issue 15 open): a colonnade shifted by one column
-#: passes the local check, which cannot see a repeated structure's other copies. Strict: the test
-#: fails once it is fixed, so the mark must then go.
-KNOWN = "known wrong answer (issue 15): repeated structure passes the local check"
+#: Added after the sixth round: repeated 182, a colonnade returned one column off (it overlaps
+#: more there than at the truth, so the verification ranked it first): refused as ambiguous since
+#: the best pose's own slides to other peaks along the colonnade are probed and one keeps the free
+#: space clearly clearer.
 
 SAMPLE = [
     ("corner", 59),
@@ -69,7 +69,7 @@ SAMPLE = [
     ("corridor", 81),
     ("corridor", 1086),
     ("corridor", 1092),
-    pytest.param("repeated", 182, marks=pytest.mark.xfail(strict=True, reason=KNOWN)),
+    ("repeated", 182),
 ]
 
 
@@ -190,3 +190,13 @@ def test_families_list_methods_they_can_use() -> None:
     assert "planes" in scenarios.make("corner", 0).methods
     assert "poles" in scenarios.make("poles", 0).methods
     assert scenarios.make("partial", 0).solvable is None
+
+
+def test_colonnade_one_column_off_is_refused_as_repeated_structure() -> None:
+    # The best-ranked pose is one column (3.9 m) off and passes the local check; its slide to the
+    # next peak along the colonnade is the truth, which keeps free space clearer.
+    scene = scenarios.make("repeated", 182)
+    with pytest.raises(lidarcal.CalibrationError) as refused:
+        lidarcal.calibrate(scene.reference, scene.target, method="targetless")
+    assert refused.value.kind == "ambiguous"
+    assert "repeated structure" in str(refused.value)
