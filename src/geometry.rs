@@ -347,6 +347,16 @@ impl Line {
     }
 }
 
+/// The rotation angle (radians) and translation distance (metres) between two transforms:
+/// `angle(R_a R_b^T)` and `|t_a - t_b|`.
+pub fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
+    let r = (a.rotation * b.rotation.inverse()).to_rotation_matrix();
+    (
+        rotation_angle(&r),
+        (a.translation.vector - b.translation.vector).norm(),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

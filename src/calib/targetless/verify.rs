@@ -1,0 +1,196 @@
+//! Step 4: verification of the hypotheses (screening ICP and score, then a longer ICP and the full
+//! score) and the choice of the best pose and its closest distinct rival.
+
+use nalgebra::Isometry3;
+
+use super::hypotheses::*;
+use crate::icp::IcpOptions;
+
+/// Two verified hypotheses further apart than this rotation (radians, 2 degrees) ...
+pub const DISTINCT_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// ... or this translation (metres) are different answers (for the second-best score).
+pub const DISTINCT_DISTANCE: f64 = 0.3;
+/// A verified target point agrees when a reference point lies within this distance (metres).
+pub const VERIFY_DISTANCE: f64 = 0.25;
+/// Target points (at most, by a fixed stride) scored in the verification.
+pub const VERIFY_SAMPLES: usize = 800;
+/// Reference points (at most, by a fixed stride) checked against the target's free space.
+pub const VERIFY_REFERENCE_SAMPLES: usize = 2000;
+/// Weight of the free-space violations in the verification score: `score = agreement -
+/// VIOLATION_WEIGHT (v_target + v_reference)`, each `v` the share of a cloud's checked points that
+/// fall into space the other sensor saw through ([`crate::visibility`]).
+pub const VIOLATION_WEIGHT: f64 = 3.0;
+/// Pairs of the best pose and a close contender polished by the full ICP before the result is
+/// called ambiguous or not (see the verification in [`calibrate_targetless`]).
+pub const MAX_POLISHED: usize = 4;
+/// A challenger (beyond `max_translation`) makes the result ambiguous when it scores at least
+/// this share of the best (a pose within range does from [`AMBIGUITY_RATIO`]).
+pub const CHALLENGER_AMBIGUITY_RATIO: f64 = 0.9;
+/// Target points (at most, by a fixed stride) scored in the screening of every hypothesis.
+pub const SCREEN_SAMPLES: usize = 300;
+/// Reference points (at most, by a fixed stride) checked against the target's free space in the
+/// screening.
+pub const SCREEN_REFERENCE_SAMPLES: usize = 700;
+/// Distinct hypotheses (best screening scores) that go on to the full verification.
+pub const SCREEN_KEEP: usize = 12;
+/// The result is ambiguous when a distinct pose scores at least this share of the best. At 0.8,
+/// two adversarial rooms and corners whose runner-up scored 78-79 % came back 107-120 degrees
+/// off; the real pairs' runner-ups score at most 70 %.
+pub const AMBIGUITY_RATIO: f64 = 0.75;
+
+/// Options of the quick ICP of the screening (the first stage of the verification), for a
+/// plane-pair hypothesis or a ground-sweep one (wider first distance: the start is up to half a
+/// step of yaw and the in-plane translation away).
+pub(super) fn screen_icp_options(sweep: bool) -> IcpOptions {
+    IcpOptions {
+        max_distance: if sweep { 2.0 } else { 1.0 },
+        min_distance: 0.5,
+        shrink: 0.7,
+        max_iterations: if sweep { 7 } else { 3 },
+        samples: 300,
+        step_tolerance: 1e-4,
+    }
+}
+
+/// Options of the short ICP that continues from the screened pose of each verified hypothesis.
+pub(super) fn verify_icp_options() -> IcpOptions {
+    IcpOptions {
+        max_distance: 0.5,
+        min_distance: 0.3,
+        shrink: 0.7,
+        max_iterations: 6,
+        samples: 400,
+        step_tolerance: 1e-4,
+    }
+}
+
+/// A hypothesis after its short ICP, with its verification (see [`VIOLATION_WEIGHT`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Verified {
+    pub(super) pose: Isometry3<f64>,
+    pub(super) agreement: f64,
+    pub(super) violations: [f64; 2],
+    pub(super) score: f64,
+}
+
+/// Indices and scores of the verified hypotheses, best first (ties keep the enumeration order).
+pub(super) fn rank(verified: &[Option<Verified>]) -> Vec<(usize, f64)> {
+    let mut ranked: Vec<(usize, f64)> = verified
+        .iter()
+        .enumerate()
+        .filter_map(|(k, v)| v.map(|v| (k, v.score)))
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    ranked
+}
+
+/// The best of verified poses (`pool`, best first, each with its hypothesis) and its closest
+/// distinct rival. A close runner-up may be the same answer, not polished as far: both get the
+/// full ICP (`polish`) and are scored again before the result is called ambiguous. When the two
+/// settle on one pose, the next distinct contender is polished in turn (up to [`MAX_POLISHED`]):
+/// in a street turned by half a turn the two best hypotheses can be the same flip 0.4 m apart,
+/// and the truth beyond max_translation only third. A best pose beyond max_translation (not
+/// `within`) is always polished against the best pose within range, and only poses within range
+/// challenge it.
+pub(super) fn settle_best(
+    pool: &[(Candidate, Verified)],
+    within: &impl Fn(&Verified) -> bool,
+    polish: &impl Fn(&Verified) -> Option<Verified>,
+) -> Option<(Candidate, Verified, Option<Verified>)> {
+    let &(winner, mut top) = pool.first()?;
+    let mut top_polished = None;
+    let mut runner_up = None;
+    let mut polished_pairs = 0;
+    for &(_, v) in pool {
+        // Against a challenger that screened best, the best pose within range.
+        let eligible = within(&v) || (within(&top) && v.score >= AMBIGUITY_RATIO * top.score);
+        if !eligible || same_pose(&v.pose, &top.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
+            continue;
+        }
+        let close = !within(&top) || v.score >= AMBIGUITY_RATIO * top.score;
+        if !close || polished_pairs == MAX_POLISHED {
+            runner_up = Some(v);
+            break;
+        }
+        polished_pairs += 1;
+        let a = top_polished.or_else(|| polish(&top));
+        match (a, polish(&v)) {
+            (Some(a), Some(b))
+                if same_pose(&a.pose, &b.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE) =>
+            {
+                top = if b.score > a.score { b } else { a };
+                top_polished = Some(top);
+            }
+            (Some(a), Some(b)) => {
+                (top, runner_up) = if b.score > a.score {
+                    (b, Some(a))
+                } else {
+                    (a, Some(b))
+                };
+                break;
+            }
+            (Some(a), None) => {
+                (top, runner_up) = (a, Some(v));
+                break;
+            }
+            (None, Some(b)) => {
+                top = b;
+                top_polished = Some(b);
+            }
+            (None, None) => {
+                runner_up = Some(v);
+                break;
+            }
+        }
+    }
+    Some((winner, top, runner_up))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settle_best_polishes_a_close_rival_and_merges_one_that_settles_on_the_best() {
+        let at = |x: f64, score: f64| {
+            let pose = Isometry3::translation(x, 0.0, 0.0);
+            let c = Candidate {
+                pose,
+                free: None,
+                support: 0.0,
+                sweep: false,
+            };
+            let v = Verified {
+                pose,
+                agreement: score,
+                violations: [0.0; 2],
+                score,
+            };
+            (c, v)
+        };
+        let within = |v: &Verified| v.pose.translation.vector.norm() <= 5.0;
+        // A rival 1 m away at 90 % is polished and stays distinct: it is the runner-up.
+        let pool = [at(0.0, 1.0), at(1.0, 0.9), at(2.0, 0.5)];
+        let stay = |v: &Verified| Some(*v);
+        let (_, top, runner) = settle_best(&pool, &within, &stay).unwrap();
+        assert_eq!(top.score, 1.0);
+        assert_eq!(runner.map(|r| r.score), Some(0.9));
+        // When the rival settles onto the best (polishing moves 1 m to 0 m) they are one answer,
+        // and the next contender, at 50 %, is the runner-up without being polished.
+        let onto_best = |v: &Verified| {
+            let x = v.pose.translation.vector.x;
+            Some(if x < 1.5 { at(0.0, v.score).1 } else { *v })
+        };
+        let (_, top, runner) = settle_best(&pool, &within, &onto_best).unwrap();
+        assert_eq!(top.pose.translation.vector.x, 0.0);
+        assert_eq!(runner.map(|r| r.score), Some(0.5));
+        // A best pose beyond range is always polished against the best within range, and the
+        // better after polishing wins.
+        let pool = [at(7.0, 1.0), at(1.0, 0.5)];
+        let lift = |v: &Verified| Some(at(v.pose.translation.vector.x, v.score * 3.0).1);
+        let (_, top, runner) = settle_best(&pool, &within, &lift).unwrap();
+        assert_eq!(top.pose.translation.vector.x, 7.0);
+        assert_eq!(runner.map(|r| r.pose.translation.vector.x), Some(1.0));
+        assert!(settle_best(&[], &within, &stay).is_none());
+    }
+}
