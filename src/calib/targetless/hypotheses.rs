@@ -370,6 +370,12 @@ impl Occupancy {
     }
 }
 
+/// What the slides score against: the reference's occupied cells and the sampled target points.
+pub(super) struct SlideField {
+    pub(super) occupancy: Occupancy,
+    pub(super) samples: Vec<Point3<f64>>,
+}
+
 /// The slide score of `pose` moved along `free` by every multiple of [`SLIDE_STEP`] at least
 /// [`SLIDE_MIN`] and at most [`SLIDE_RANGE`] away (within `max_translation`), as `(offset,
 /// score)` in order of offset: the share of `samples` (target points) that land in a cell
@@ -444,11 +450,11 @@ pub(super) fn slide_peaks(
 /// beyond the reach of ICP.
 pub(super) fn slides(
     candidates: &[Candidate],
-    reference: &Occupancy,
+    field: &SlideField,
     image: &RangeImage,
-    samples: &[Point3<f64>],
     max_translation: f64,
 ) -> Vec<Candidate> {
+    let (reference, samples) = (&field.occupancy, &field.samples);
     let best_slide = |c: &Candidate| -> Option<Candidate> {
         let free = c.free?;
         let (offset, _) = slide_scores(&c.pose, &free, reference, image, samples, max_translation)

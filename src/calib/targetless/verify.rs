@@ -1,10 +1,12 @@
 //! Step 4: verification of the hypotheses (screening ICP and score, then a longer ICP and the full
 //! score) and the choice of the best pose and its closest distinct rival.
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 
 use super::hypotheses::*;
-use crate::icp::IcpOptions;
+use crate::error::Result;
+use crate::icp::{point_to_plane_fit, point_to_plane_icp, IcpOptions, IcpResult, SurfaceCloud};
+use crate::visibility::RangeImage;
 
 /// Two verified hypotheses further apart than this rotation (radians, 2 degrees) ...
 pub const DISTINCT_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
@@ -144,6 +146,185 @@ pub(super) fn settle_best(
         }
     }
     Some((winner, top, runner_up))
+}
+
+/// Every `len / count`-th point of `points` (a fixed stride): about `count` of them.
+pub(super) fn stride_sample(points: &[Point3<f64>], count: usize) -> Vec<Point3<f64>> {
+    let stride = points.len().div_ceil(count).max(1);
+    points.iter().step_by(stride).copied().collect()
+}
+
+/// Sampled points a pose is scored on: target points (agreement with the reference, and the
+/// reference's free space) and reference points (the target's free space).
+pub(super) type Samples = [Vec<Point3<f64>>; 2];
+
+/// Scores poses of the (downsampled) target against the (downsampled) reference: the reference's
+/// surface for the agreement and ICP, both clouds' range images for the free space, and the
+/// points sampled for the screening (`quick`) and for the full verification (`full`).
+pub(super) struct Verifier<'a> {
+    surface: SurfaceCloud,
+    target: &'a [Point3<f64>],
+    reference_image: RangeImage,
+    target_image: RangeImage,
+    quick: Samples,
+    full: Samples,
+    final_icp: IcpOptions,
+}
+
+impl<'a> Verifier<'a> {
+    /// Indexes `reference` and images both clouds; `final_icp` is the ICP of
+    /// [`polish`](Self::polish) and of the final refinement.
+    pub(super) fn new(
+        reference: &[Point3<f64>],
+        target: &'a [Point3<f64>],
+        final_icp: IcpOptions,
+    ) -> Result<Self> {
+        let surface = SurfaceCloud::new(reference.to_vec())?;
+        let reference_image = RangeImage::new(reference, RangeImage::DEFAULT_RESOLUTION)?;
+        let target_image = RangeImage::new(target, RangeImage::DEFAULT_RESOLUTION)?;
+        Ok(Verifier {
+            surface,
+            target,
+            reference_image,
+            target_image,
+            full: [
+                stride_sample(target, VERIFY_SAMPLES),
+                stride_sample(reference, VERIFY_REFERENCE_SAMPLES),
+            ],
+            quick: [
+                stride_sample(target, SCREEN_SAMPLES),
+                stride_sample(reference, SCREEN_REFERENCE_SAMPLES),
+            ],
+            final_icp,
+        })
+    }
+
+    /// The reference's range image (points in the reference sensor's frame).
+    pub(super) fn reference_image(&self) -> &RangeImage {
+        &self.reference_image
+    }
+
+    /// Target points of the full verification.
+    pub(super) fn full_target_samples(&self) -> usize {
+        self.full[0].len()
+    }
+
+    /// The verification score of `pose` on `samples` (see [`VIOLATION_WEIGHT`]).
+    pub(super) fn score(&self, pose: Isometry3<f64>, samples: &Samples) -> Verified {
+        let [target_points, reference_points] = samples;
+        let agreement = self.surface.overlap(target_points, &pose, VERIFY_DISTANCE);
+        let share = |count: usize, total: usize| count as f64 / total.max(1) as f64;
+        let violations = [
+            share(
+                self.reference_image.count_violations(target_points, &pose),
+                target_points.len(),
+            ),
+            share(
+                self.target_image
+                    .count_violations(reference_points, &pose.inverse()),
+                reference_points.len(),
+            ),
+        ];
+        Verified {
+            pose,
+            agreement,
+            violations,
+            score: agreement - VIOLATION_WEIGHT * (violations[0] + violations[1]),
+        }
+    }
+
+    fn icp_then_score(
+        &self,
+        start: &Isometry3<f64>,
+        icp: &IcpOptions,
+        samples: &Samples,
+    ) -> Option<Verified> {
+        point_to_plane_icp(&self.surface, self.target, start, icp)
+            .ok()
+            .map(|r| self.score(r.pose, samples))
+    }
+
+    /// The screening of one hypothesis: a quick ICP and the score on the quick samples.
+    pub(super) fn screen(&self, candidate: &Candidate) -> Option<Verified> {
+        self.icp_then_score(
+            &candidate.pose,
+            &screen_icp_options(candidate.sweep),
+            &self.quick,
+        )
+    }
+
+    /// The verification of a screened pose: a short ICP and the full score.
+    pub(super) fn verify(&self, start: &Isometry3<f64>) -> Option<Verified> {
+        self.icp_then_score(start, &verify_icp_options(), &self.full)
+    }
+
+    /// A pose probed around the best one (a half turn, a slide): screened, then verified.
+    pub(super) fn settle(&self, start: &Isometry3<f64>) -> Option<Verified> {
+        self.icp_then_score(start, &screen_icp_options(false), &self.quick)
+            .and_then(|v| self.verify(&v.pose))
+    }
+
+    /// A verified pose carried on by the final ICP and scored again.
+    pub(super) fn polish(&self, v: &Verified) -> Option<Verified> {
+        self.icp_then_score(&v.pose, &self.final_icp, &self.full)
+    }
+
+    /// The final point-to-plane ICP from `start`.
+    pub(super) fn final_icp(&self, start: &Isometry3<f64>) -> Result<IcpResult> {
+        point_to_plane_icp(&self.surface, self.target, start, &self.final_icp)
+    }
+
+    /// The final ICP's correspondences and information at `pose`, without moving it.
+    pub(super) fn fit_at(&self, pose: &Isometry3<f64>) -> Result<IcpResult> {
+        point_to_plane_fit(&self.surface, self.target, pose, &self.final_icp)
+    }
+}
+
+/// `f` over `items`, on rayon's pool with the `parallel` feature.
+fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync + Send) -> Vec<U> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter().map(f).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter().map(f).collect()
+    }
+}
+
+/// The verification (step 4) of `chosen` hypotheses: every one screened, the best
+/// [`SCREEN_KEEP`] distinct screened poses verified. The verified poses best first, each with
+/// the hypothesis it grew from.
+pub(super) fn verify_hypotheses(
+    verifier: &Verifier<'_>,
+    chosen: &[Candidate],
+) -> Vec<(Candidate, Verified)> {
+    let screened: Vec<Option<Verified>> = par_map(chosen, |c| verifier.screen(c));
+    let mut kept: Vec<(usize, Isometry3<f64>)> = Vec::new();
+    for (k, _) in rank(&screened) {
+        if kept.len() >= SCREEN_KEEP {
+            break;
+        }
+        let Some(Some(v)) = screened.get(k) else {
+            continue;
+        };
+        if !kept
+            .iter()
+            .any(|(_, p)| same_pose(p, &v.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+        {
+            kept.push((k, v.pose));
+        }
+    }
+    let verified: Vec<Option<Verified>> = par_map(&kept, |(_, pose)| verifier.verify(pose));
+    rank(&verified)
+        .iter()
+        .filter_map(|&(k, _)| {
+            let v = verified.get(k).copied().flatten()?;
+            let c = kept.get(k).and_then(|(i, _)| chosen.get(*i)).copied()?;
+            Some((c, v))
+        })
+        .collect()
 }
 
 #[cfg(test)]
