@@ -19,6 +19,8 @@
 //!   conversions, [`Plane`] and [`Line`].
 //! * [`kabsch`](mod@kabsch): weighted Kabsch with the reflection fix and a documented degeneracy test.
 //! * [`lm`]: a Levenberg–Marquardt solver on SE(3) with a report (termination reason, `J^T J`).
+//! * [`pose_graph`]: Gauss–Newton refinement of an SE(3) pose graph with a fixed reference node,
+//!   with options and a report.
 //! * [`residuals`]: point-to-plane and point-to-line problems with analytic Jacobians.
 //! * [`ransac`]: parallel, deterministic RANSAC for planes and lines; multi-plane extraction.
 //! * [`fit`]: plane, line and cylinder fits ([`fit::cylinder::fit_cylinder`] recovers a pole's axis).
@@ -87,6 +89,7 @@ pub mod icp;
 pub mod kabsch;
 pub mod lm;
 pub mod metrics;
+pub mod pose_graph;
 pub mod ransac;
 pub mod residuals;
 pub mod sim;

@@ -13,7 +13,7 @@
 //!   when none succeeds); malformed input is returned at once.
 //! * [`calibrate_rig`] builds the edges and refines them with [`refine_pose_graph`]
 //!   (Gauss–Newton on the SE(3) tangent errors, each edge weighted by its information matrix,
-//!   with a step halved whenever it would raise the cost).
+//!   with a step halved whenever it would raise the cost; see [`crate::pose_graph`]).
 //!
 //! ```
 //! use lidarcal::calib::rig::{calibrate, Cloud, Method, MethodOptions};
@@ -35,15 +35,17 @@
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Point3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 
 use crate::calib::planes::{calibrate_planes, PlanarCalibration, PlanarOptions};
 use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
 use crate::calib::targetless::pose_error;
 use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
 use crate::check::CheckReport;
-use crate::geometry::{se3_exp, se3_log};
 use crate::icp::SurfaceCloud;
+use crate::pose_graph::{
+    edge_error, refine_pose_graph, PoseGraphEdge, PoseGraphOptions, PoseGraphReport,
+};
 use crate::{Error, FailureKind, Result};
 
 /// Distance (m) within which a mapped target point counts as agreeing with the reference cloud,
@@ -406,154 +408,6 @@ fn no_method_error(reasons: &[(FailureKind, String)]) -> Error {
     )
 }
 
-/// An edge of a pose graph: a measurement of `a_from_b` between nodes `a` and `b`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PoseGraphEdge {
-    /// Index of node `a`.
-    pub a: usize,
-    /// Index of node `b`.
-    pub b: usize,
-    /// The measured transform mapping `b`'s points into `a`'s frame.
-    pub a_from_b: Isometry3<f64>,
-    /// Information matrix (inverse covariance) of the left-perturbation tangent `[rho, phi]`.
-    pub information: Matrix6<f64>,
-}
-
-/// Tangent error `log(z⁻¹ · a⁻¹ · b)` of an edge measuring `z = a_from_b` against poses `a`, `b`
-/// (each `reference_from_node`): translation first, then rotation.
-pub fn edge_error(
-    a_from_b: &Isometry3<f64>,
-    reference_from_a: &Isometry3<f64>,
-    reference_from_b: &Isometry3<f64>,
-) -> Vector6<f64> {
-    se3_log(&(a_from_b.inverse() * reference_from_a.inverse() * reference_from_b))
-}
-
-fn graph_cost(poses: &[Isometry3<f64>], edges: &[PoseGraphEdge]) -> f64 {
-    edges
-        .iter()
-        .map(|e| {
-            let r = edge_error(&e.a_from_b, &poses[e.a], &poses[e.b]);
-            (r.transpose() * e.information * r)[(0, 0)]
-        })
-        .sum()
-}
-
-/// Step of the central differences of [`refine_pose_graph`].
-const GRAPH_STEP: f64 = 1e-6;
-
-/// Refines the poses `reference_from_node` of a pose graph whose node 0 (the reference) is fixed:
-/// minimises `Σ eᵀ W e` over the edges by Gauss–Newton (Jacobians by central differences on the
-/// left perturbation `T ← exp(δ) T`; a step that raises the cost is halved). Returns the refined
-/// poses, node 0 unchanged. `Err(InvalidInput)` for an edge naming a missing node, a self-loop,
-/// a non-finite or non-symmetric information matrix, or a node in no edge; `Err(Degenerate)` when
-/// the information does not constrain every node.
-pub fn refine_pose_graph(
-    poses: &[Isometry3<f64>],
-    edges: &[PoseGraphEdge],
-    iterations: usize,
-) -> Result<Vec<Isometry3<f64>>> {
-    for (k, e) in edges.iter().enumerate() {
-        if e.a >= poses.len() || e.b >= poses.len() || e.a == e.b {
-            return Err(Error::InvalidInput(format!(
-                "edge {k} joins nodes {} and {} of a graph with {} nodes",
-                e.a,
-                e.b,
-                poses.len()
-            )));
-        }
-        if e.information.iter().any(|v| !v.is_finite())
-            || (e.information - e.information.transpose()).amax()
-                > 1e-9 * e.information.amax().max(1.0)
-        {
-            return Err(Error::InvalidInput(format!(
-                "edge {k}: the information matrix must be finite and symmetric"
-            )));
-        }
-    }
-    if let Some(lonely) = (1..poses.len()).find(|&n| !edges.iter().any(|e| e.a == n || e.b == n)) {
-        return Err(Error::InvalidInput(format!(
-            "node {lonely} is in no edge: nothing places it"
-        )));
-    }
-    let mut current = poses.to_vec();
-    let free = poses.len().saturating_sub(1);
-    if free == 0 || edges.is_empty() {
-        return Ok(current);
-    }
-    let size = 6 * free;
-    let mut cost = graph_cost(&current, edges);
-    for _ in 0..iterations {
-        let mut hessian = DMatrix::<f64>::zeros(size, size);
-        let mut gradient = DVector::<f64>::zeros(size);
-        for e in edges {
-            let e0 = edge_error(&e.a_from_b, &current[e.a], &current[e.b]);
-            let mut jac = DMatrix::<f64>::zeros(6, size);
-            for node in [e.a, e.b] {
-                if node == 0 {
-                    continue;
-                }
-                for d in 0..6 {
-                    let mut delta = Vector6::zeros();
-                    delta[d] = GRAPH_STEP;
-                    let moved = |sign: f64| {
-                        let step = se3_exp(&(delta * sign));
-                        let (mut pa, mut pb) = (current[e.a], current[e.b]);
-                        if node == e.a {
-                            pa = step * pa;
-                        } else {
-                            pb = step * pb;
-                        }
-                        edge_error(&e.a_from_b, &pa, &pb)
-                    };
-                    let column = (moved(1.0) - moved(-1.0)) / (2.0 * GRAPH_STEP);
-                    for r in 0..6 {
-                        jac[(r, 6 * (node - 1) + d)] = column[r];
-                    }
-                }
-            }
-            let w = DMatrix::from_iterator(6, 6, e.information.iter().copied());
-            let e0 = DVector::from_iterator(6, e0.iter().copied());
-            let jtw = jac.transpose() * w;
-            hessian += &jtw * &jac;
-            gradient += &jtw * e0;
-        }
-        for i in 0..size {
-            hessian[(i, i)] += 1e-9;
-        }
-        let Some(step) = hessian.cholesky().map(|c| -c.solve(&gradient)) else {
-            return Err(Error::Degenerate(
-                "the pose graph does not constrain every node (an information matrix is not \
-                 positive definite)"
-                    .into(),
-            ));
-        };
-        let mut scale = 1.0;
-        let mut accepted = None;
-        for _ in 0..20 {
-            let mut trial = current.clone();
-            for (node, pose) in trial.iter_mut().enumerate().skip(1) {
-                let s = step.rows(6 * (node - 1), 6) * scale;
-                *pose = se3_exp(&Vector6::from_iterator(s.iter().copied())) * *pose;
-            }
-            let c = graph_cost(&trial, edges);
-            if c.is_finite() && c <= cost {
-                accepted = Some((trial, c));
-                break;
-            }
-            scale *= 0.5;
-        }
-        let Some((trial, c)) = accepted else { break };
-        let moved = step.norm() * scale;
-        current = trial;
-        cost = c;
-        if moved < 1e-10 {
-            break;
-        }
-    }
-    Ok(current)
-}
-
 /// Default edge weight when a method gives no covariance: 1 cm and 0.1 degree.
 fn default_information() -> Matrix6<f64> {
     let r = 0.1f64.to_radians();
@@ -599,8 +453,8 @@ pub struct RigOptions {
     pub require_all: bool,
     /// See [`MIN_PAIR_OVERLAP`].
     pub min_pair_overlap: f64,
-    /// Gauss–Newton iterations of the pose graph.
-    pub graph_iterations: usize,
+    /// How the pose graph is refined.
+    pub pose_graph: PoseGraphOptions,
 }
 
 impl Default for RigOptions {
@@ -611,7 +465,7 @@ impl Default for RigOptions {
             pairwise: true,
             require_all: true,
             min_pair_overlap: MIN_PAIR_OVERLAP,
-            graph_iterations: 20,
+            pose_graph: PoseGraphOptions::default(),
         }
     }
 }
@@ -663,6 +517,8 @@ pub struct RigCalibration {
     pub failures: Vec<RigFailure>,
     /// Targets nothing connects to the reference (only with `require_all = false`).
     pub unconnected: Vec<String>,
+    /// How the pose-graph refinement of the placed targets went.
+    pub pose_graph: PoseGraphReport,
 }
 
 impl RigCalibration {
@@ -680,9 +536,9 @@ impl RigCalibration {
 /// `min_pair_overlap` of one's points onto the other; initial poses by breadth-first search from
 /// the reference; then [`refine_pose_graph`] with every kept edge weighted by
 /// [`edge_information`]. A target that fails against the reference but overlaps a placed target
-/// is reached through it. Errors: `InvalidInput` for no targets, a target named [`REFERENCE`] or
-/// two targets of one name; `Calibration` naming every pair's reason when some target cannot be
-/// placed and `require_all` is set (or when none can).
+/// is reached through it. Errors: `InvalidInput` for no targets, a target named [`REFERENCE`],
+/// two targets of one name or bad [`RigOptions::pose_graph`]; `Calibration` naming every pair's
+/// reason when some target cannot be placed and `require_all` is set (or when none can).
 pub fn calibrate_rig(
     reference: Cloud<'_>,
     targets: &[(&str, Cloud<'_>)],
@@ -709,6 +565,7 @@ pub fn calibrate_rig(
             options.min_pair_overlap
         )));
     }
+    options.pose_graph.validate()?;
     // Node 0 is the reference, node i + 1 the target i.
     let names: Vec<&str> = std::iter::once(REFERENCE)
         .chain(targets.iter().map(|(n, _)| *n))
@@ -752,10 +609,10 @@ pub fn calibrate_rig(
                 };
                 let surface = match surface {
                     Some(ref s) => s,
-                    None => surface.insert(SurfaceCloud::new(clouds[a].points.to_vec())?),
+                    None => surface.insert(SurfaceCloud::new(clouds[a].points().to_vec())?),
                 };
                 let shared = surface.overlap(
-                    clouds[b].points,
+                    clouds[b].points(),
                     c.reference_from_target(),
                     options.methods.agreement_distance,
                 );
@@ -843,7 +700,8 @@ pub fn calibrate_rig(
         })
         .unzip();
     let start: Vec<Isometry3<f64>> = poses.iter().flatten().copied().collect();
-    let refined = refine_pose_graph(&start, &graph, options.graph_iterations)?;
+    let solution = refine_pose_graph(&start, &graph, &options.pose_graph)?;
+    let refined = solution.poses;
     let refined_of = |node: usize| index[node].and_then(|i| refined.get(i)).copied();
     let mut edges = Vec::with_capacity(measured.len());
     for ((a, b, c), g) in measured.into_iter().zip(&graph) {
@@ -870,20 +728,13 @@ pub fn calibrate_rig(
         edges,
         failures,
         unconnected,
+        pose_graph: solution.report,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Translation3, UnitQuaternion, Vector3};
-
-    fn pose(t: [f64; 3], axis: [f64; 3], angle: f64) -> Isometry3<f64> {
-        Isometry3::from_parts(
-            Translation3::new(t[0], t[1], t[2]),
-            UnitQuaternion::from_scaled_axis(Vector3::from(axis).normalize() * angle),
-        )
-    }
 
     #[test]
     fn method_names_round_trip() {
@@ -898,83 +749,6 @@ mod tests {
         assert!(matches!(
             Method::from_name("icp"),
             Err(Error::InvalidInput(m)) if m.contains("'targetless'")
-        ));
-    }
-
-    #[test]
-    fn consistent_graph_stays_put_and_a_cycle_error_is_shared_by_weight() {
-        let a = pose([1.0, 0.5, 0.2], [0.0, 0.0, 1.0], 0.4);
-        let b = pose([-1.0, 0.3, 0.1], [0.2, 1.0, 0.0], -0.3);
-        let eye = Matrix6::identity();
-        let edges = |ab: Isometry3<f64>, w_ab: f64| {
-            vec![
-                PoseGraphEdge {
-                    a: 0,
-                    b: 1,
-                    a_from_b: a,
-                    information: eye,
-                },
-                PoseGraphEdge {
-                    a: 0,
-                    b: 2,
-                    a_from_b: b,
-                    information: eye,
-                },
-                PoseGraphEdge {
-                    a: 1,
-                    b: 2,
-                    a_from_b: ab,
-                    information: eye * w_ab,
-                },
-            ]
-        };
-        let truth = a.inverse() * b;
-        let start = [Isometry3::identity(), a, b];
-        let out = refine_pose_graph(&start, &edges(truth, 1.0), 20).unwrap();
-        for (x, y) in out.iter().zip(&start) {
-            let (r, t) = crate::calib::targetless::pose_error(x, y);
-            assert!(r < 1e-9 && t < 1e-9, "{r} {t}");
-        }
-        // A 3 cm error on the a-b edge: with equal weights it is shared, with a heavy weight
-        // the graph follows that edge.
-        let off = Isometry3::translation(0.03, 0.0, 0.0) * truth;
-        let shared = refine_pose_graph(&start, &edges(off, 1.0), 20).unwrap();
-        let residual = |p: &[Isometry3<f64>]| edge_error(&off, &p[1], &p[2]).norm();
-        let heavy = refine_pose_graph(&start, &edges(off, 1e6), 20).unwrap();
-        assert!(residual(&shared) > 0.005 && residual(&shared) < 0.025);
-        assert!(residual(&heavy) < 1e-4, "{}", residual(&heavy));
-        assert_eq!(shared[0], Isometry3::identity());
-        // The cost went down from the start.
-        assert!(graph_cost(&shared, &edges(off, 1.0)) < graph_cost(&start, &edges(off, 1.0)));
-    }
-
-    #[test]
-    fn bad_graphs_are_errors() {
-        let e = PoseGraphEdge {
-            a: 0,
-            b: 3,
-            a_from_b: Isometry3::identity(),
-            information: Matrix6::identity(),
-        };
-        let poses = [Isometry3::identity(); 2];
-        assert!(matches!(
-            refine_pose_graph(&poses, std::slice::from_ref(&e), 5),
-            Err(Error::InvalidInput(_))
-        ));
-        let mut nan = e.clone();
-        nan.b = 1;
-        nan.information[(0, 0)] = f64::NAN;
-        assert!(matches!(
-            refine_pose_graph(&poses, &[nan], 5),
-            Err(Error::InvalidInput(_))
-        ));
-        // Node 2 is in no edge.
-        let mut one = e;
-        one.b = 1;
-        let three = [Isometry3::identity(); 3];
-        assert!(matches!(
-            refine_pose_graph(&three, &[one], 5),
-            Err(Error::InvalidInput(m)) if m.contains("node 2")
         ));
     }
 }

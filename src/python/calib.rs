@@ -22,6 +22,9 @@ use crate::calib::targetless::{
 use crate::calib::Timings;
 use crate::geometry::Plane;
 use crate::lm::{LmOptions, LmReport, Loss};
+use crate::pose_graph::{
+    refine_pose_graph as rs_refine_pose_graph, PoseGraphEdge, PoseGraphOptions,
+};
 
 /// What a calibration method returned (the crate's own sum of the three results).
 type Inner = Calibration;
@@ -959,7 +962,7 @@ fn refine_pose_graph<'py>(
                 &format!("edges[{k}] a_from_b"),
             )?)?;
             let w = arrays::matrix(w, &format!("edges[{k}] information"), 6, 6)?;
-            Ok(rig::PoseGraphEdge {
+            Ok(PoseGraphEdge {
                 a: *a,
                 b: *b,
                 a_from_b: z,
@@ -967,10 +970,12 @@ fn refine_pose_graph<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
-    let refined = run(py, move || {
-        rig::refine_pose_graph(&poses, &edges, iterations)
-    })?;
-    refined.iter().map(|p| matrix4(py, p)).collect()
+    let options = PoseGraphOptions {
+        max_iterations: iterations,
+        ..PoseGraphOptions::default()
+    };
+    let refined = run(py, move || rs_refine_pose_graph(&poses, &edges, &options))?;
+    refined.poses.iter().map(|p| matrix4(py, p)).collect()
 }
 
 /// Fraction of target points that land within `distance` of a reference point under
