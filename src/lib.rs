@@ -10,8 +10,10 @@
 //! * [`calib::poles`]: two or more poles wrapped in retro-reflective tape (cylinder axes).
 //! * [`calib::targetless`]: the planes of an ordinary scene (a street), matched without an
 //!   initial guess, verified by free-space consistency and refined by point-to-plane ICP.
-//! * [`calib::rig`]: one entry point ([`calib::rig::Method::Auto`] keeps the best-fitting
-//!   method's result) and several sensors at once, made consistent by a pose graph.
+//! * [`calib::method`]: one entry point, [`calib::calibrate`] ([`calib::Method::Auto`] keeps the
+//!   best-fitting method's result).
+//! * [`calib::rig`]: several sensors at once, [`calib::calibrate_rig`], made consistent by a pose
+//!   graph.
 //!
 //! and what they are built on:
 //!

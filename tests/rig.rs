@@ -1,8 +1,8 @@
-//! `calib::rig`: `Method::Auto` on the three kinds of simulated scene, and `calibrate_rig` on a
-//! street seen by a roof unit and two tilted side units.
+//! `calib::method` and `calib::rig`: `Method::Auto` on the three kinds of simulated scene, and
+//! `calibrate_rig` on a street seen by a roof unit and two tilted side units.
 
-use lidarcal::calib::rig::{calibrate, calibrate_rig, Cloud, Method, MethodOptions, RigOptions};
 use lidarcal::calib::targetless;
+use lidarcal::calib::{calibrate, calibrate_rig, Cloud, Method, MethodOptions, RigOptions};
 
 /// (rotation error in degrees, translation error in metres).
 fn pose_error(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> (f64, f64) {

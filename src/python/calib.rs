@@ -9,13 +9,14 @@ use pyo3::types::PyDict;
 
 use super::arrays::{self, row_major, to_numpy};
 use super::run;
+use crate::calib::method::{self, Calibration, Cloud, Method, MethodOptions};
 use crate::calib::planes::{
     calibrate_planes as rs_calibrate_planes, PlanarCalibration, PlanarOptions,
 };
 use crate::calib::poles::{
     calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
 };
-use crate::calib::rig::{self, Calibration, Cloud, Method, MethodOptions, RigOptions};
+use crate::calib::rig::{self, RigOptions};
 use crate::calib::targetless::{
     calibrate_targetless as rs_calibrate_targetless, TargetlessCalibration, TargetlessOptions,
 };
@@ -836,7 +837,7 @@ fn calibrate_auto(
     let reference = owned_cloud(reference, "reference")?;
     let target = owned_cloud(target, "target")?;
     let inner = run(py, move || {
-        rig::calibrate(
+        method::calibrate(
             borrow_cloud(&reference)?,
             borrow_cloud(&target)?,
             Method::Auto,
@@ -1019,8 +1020,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate_rig, m)?)?;
     m.add_function(wrap_pyfunction!(refine_pose_graph, m)?)?;
     m.add_function(wrap_pyfunction!(overlap, m)?)?;
-    m.add("AGREEMENT_DISTANCE", rig::AGREEMENT_DISTANCE)?;
-    m.add("AUTO_TIE", rig::AUTO_TIE)?;
+    m.add("AGREEMENT_DISTANCE", method::AGREEMENT_DISTANCE)?;
+    m.add("AUTO_TIE", method::AUTO_TIE)?;
     m.add("MIN_PAIR_OVERLAP", rig::MIN_PAIR_OVERLAP)?;
     m.add(
         "MAX_BRIGHT_FRACTION",
