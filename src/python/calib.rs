@@ -851,7 +851,8 @@ fn calibrate_auto(
 /// (name, cloud); the method options as for calibrate_auto. Returns a dict: "transforms" and
 /// "direct" ({name: (4, 4)}), "edges" (a list of (a, b, method, a_from_b,
 /// rotation_residual_deg, translation_residual_m, CalibrationResult)), "failures"
-/// ({(a, b): reason}) and "unconnected" (names).
+/// ({(a, b): reason}), "unconnected" (names) and "pose_graph" (the refinement's report: a dict of
+/// converged, termination, iterations, initial_cost, final_cost).
 #[pyfunction]
 #[pyo3(signature = (reference, targets, *, method="auto", pairwise=true, require_all=true, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
@@ -932,6 +933,14 @@ fn calibrate_rig<'py>(
     d.set_item("failures", failures)?;
     d.set_item("failure_kinds", failure_kinds)?;
     d.set_item("unconnected", out.unconnected)?;
+    let report = out.pose_graph;
+    let graph = PyDict::new(py);
+    graph.set_item("converged", report.converged)?;
+    graph.set_item("termination", report.termination.as_str())?;
+    graph.set_item("iterations", report.iterations)?;
+    graph.set_item("initial_cost", report.initial_cost)?;
+    graph.set_item("final_cost", report.final_cost)?;
+    d.set_item("pose_graph", graph)?;
     Ok(d)
 }
 
