@@ -10,8 +10,10 @@
 //! * [`calib::poles`]: two or more poles wrapped in retro-reflective tape (cylinder axes).
 //! * [`calib::targetless`]: the planes of an ordinary scene (a street), matched without an
 //!   initial guess, verified by free-space consistency and refined by point-to-plane ICP.
-//! * [`calib::rig`]: one entry point ([`calib::rig::Method::Auto`] keeps the best-fitting
-//!   method's result) and several sensors at once, made consistent by a pose graph.
+//! * [`calib::method`]: one entry point, [`calib::calibrate`] ([`calib::Method::Auto`] keeps the
+//!   best-fitting method's result).
+//! * [`calib::rig`]: several sensors at once, [`calib::calibrate_rig`], made consistent by a pose
+//!   graph.
 //!
 //! and what they are built on:
 //!
@@ -19,6 +21,8 @@
 //!   conversions, [`Plane`] and [`Line`].
 //! * [`kabsch`](mod@kabsch): weighted Kabsch with the reflection fix and a documented degeneracy test.
 //! * [`lm`]: a Levenberg–Marquardt solver on SE(3) with a report (termination reason, `J^T J`).
+//! * [`pose_graph`]: Gauss–Newton refinement of an SE(3) pose graph with a fixed reference node,
+//!   with options and a report.
 //! * [`residuals`]: point-to-plane and point-to-line problems with analytic Jacobians.
 //! * [`ransac`]: parallel, deterministic RANSAC for planes and lines; multi-plane extraction.
 //! * [`fit`]: plane, line and cylinder fits ([`fit::cylinder::fit_cylinder`] recovers a pole's axis).
@@ -87,6 +91,7 @@ pub mod icp;
 pub mod kabsch;
 pub mod lm;
 pub mod metrics;
+pub mod pose_graph;
 pub mod ransac;
 pub mod residuals;
 pub mod sim;

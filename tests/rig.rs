@@ -1,8 +1,8 @@
-//! `calib::rig`: `Method::Auto` on the three kinds of simulated scene, and `calibrate_rig` on a
-//! street seen by a roof unit and two tilted side units.
+//! `calib::method` and `calib::rig`: `Method::Auto` on the three kinds of simulated scene, and
+//! `calibrate_rig` on a street seen by a roof unit and two tilted side units.
 
-use lidarcal::calib::rig::{calibrate, calibrate_rig, Cloud, Method, MethodOptions, RigOptions};
 use lidarcal::calib::targetless;
+use lidarcal::calib::{calibrate, calibrate_rig, Cloud, Method, MethodOptions, RigOptions};
 
 /// (rotation error in degrees, translation error in metres).
 fn pose_error(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> (f64, f64) {
@@ -178,6 +178,10 @@ fn rig_of_a_roof_unit_and_two_side_units() {
     let kept = pairs.contains(&("left", "right"));
     let failed = rig.failures.iter().any(|f| f.a == "left" && f.b == "right");
     assert!(kept != failed, "{:?}", rig.failures);
+    // The pose graph settled, and never raised the cost of the start.
+    let report = rig.pose_graph;
+    assert!(report.converged, "{report:?}");
+    assert!(report.iterations > 0 && report.final_cost <= report.initial_cost);
 }
 
 #[test]
@@ -198,5 +202,12 @@ fn rig_argument_errors() {
             Err(Error::InvalidInput(m)) => assert!(m.contains(needle), "{m}"),
             other => panic!("{needle}: {other:?}"),
         }
+    }
+    // Bad pose-graph options are refused before any calibration runs.
+    let mut bad = RigOptions::default();
+    bad.pose_graph.jacobian_step = 0.0;
+    match calibrate_rig(Cloud::new(&reference), &[("left", cloud)], &bad) {
+        Err(Error::InvalidInput(m)) => assert!(m.contains("jacobian_step"), "{m}"),
+        other => panic!("jacobian_step: {other:?}"),
     }
 }

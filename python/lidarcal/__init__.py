@@ -15,7 +15,8 @@ Calibration:
 * :func:`calibrate` -- one entry point: ``method="auto"`` tries the corner, the targetless and
   (with intensity) the pole method and keeps the best; ``result.method`` names it.
 * :func:`calibrate_rig` -- several targets to one reference plus target-to-target edges, made
-  consistent by a pose-graph refinement; returns a :class:`RigCalibration`.
+  consistent by a pose-graph refinement; returns a :class:`RigCalibration`, whose ``pose_graph``
+  (a :class:`PoseGraphReport`) says how the refinement went.
 * :func:`check` -- certifies any ``reference_from_target`` (from this library, a file or another
   tool) against the two clouds: a :class:`CheckReport` with the verdict ``"consistent"``,
   ``"inconsistent"`` or ``"unverifiable"``, its reason and the evidence. Every calibration passes
@@ -74,6 +75,7 @@ from lidarcal._lidarcal import (
     write_points,
 )
 from lidarcal.calibrate import (
+    PoseGraphReport,
     RigCalibration,
     RigEdge,
     calibrate,
@@ -88,6 +90,7 @@ __all__ = [
     "FileFormatError",
     "Line",
     "Plane",
+    "PoseGraphReport",
     "RefineResult",
     "RigCalibration",
     "RigEdge",

@@ -287,6 +287,32 @@ def calibrate_auto(
     vendor: str | None = None,
     max_bright_fraction: float | None = None,
 ) -> CalibrationResult: ...
+
+PoseGraphTermination = Literal[
+    "step_tolerance", "no_further_decrease", "nothing_to_refine", "max_iterations"
+]
+
+class PoseGraphReportDict(TypedDict):
+    """How the pose-graph refinement of ``calibrate_rig`` went."""
+
+    converged: bool
+    termination: PoseGraphTermination
+    iterations: int
+    initial_cost: float
+    final_cost: float
+
+class RigDict(TypedDict):
+    """What ``calibrate_rig`` returns (``lidarcal.calibrate_rig`` builds its result from it)."""
+
+    transforms: dict[str, F64Array]
+    direct: dict[str, F64Array]
+    #: (a, b, method, a_from_b, rotation_residual_deg, translation_residual_m, result)
+    edges: list[tuple[str, str, str, F64Array, float, float, CalibrationResult]]
+    failures: dict[tuple[str, str], str]
+    failure_kinds: dict[tuple[str, str], FailureKind | None]
+    unconnected: list[str]
+    pose_graph: PoseGraphReportDict
+
 def calibrate_rig(
     reference: ArrayLike,
     targets: list[tuple[str, ArrayLike]],
@@ -300,7 +326,7 @@ def calibrate_rig(
     intensity_threshold: float | None = None,
     vendor: str | None = None,
     max_bright_fraction: float | None = None,
-) -> dict[str, Any]: ...
+) -> RigDict: ...
 def refine_pose_graph(
     poses: list[F64Array],
     edges: list[tuple[int, int, F64Array, F64Array]],

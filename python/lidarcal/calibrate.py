@@ -7,8 +7,9 @@
   and a small pose-graph refinement that makes the set consistent.
 * :func:`refine_pose_graph` -- that refinement on poses and edges of your own.
 
-The work is in the Rust crate (``lidarcal::calib::rig``), with the GIL released; this module
-checks arguments and builds the result objects.
+The work is in the Rust crate (``lidarcal::calib::method``, ``lidarcal::calib::rig`` and
+``lidarcal::pose_graph``), with the GIL released; this module checks arguments and builds the
+result objects.
 """
 
 from __future__ import annotations
@@ -135,6 +136,22 @@ class RigEdge:
 
 
 @dataclass(frozen=True)
+class PoseGraphReport:
+    """How the pose-graph refinement of :func:`calibrate_rig` went.
+
+    ``converged`` is False only when the iteration cap ran out first; ``termination`` says why it
+    stopped (``"step_tolerance"``, ``"no_further_decrease"``, ``"nothing_to_refine"`` or
+    ``"max_iterations"``); ``iterations`` counts the Gauss-Newton iterations run; the cost
+    ``sum(e^T W e)`` over the edges never rises, so ``final_cost <= initial_cost``."""
+
+    converged: bool
+    termination: str
+    iterations: int
+    initial_cost: float
+    final_cost: float
+
+
+@dataclass(frozen=True)
 class RigCalibration:
     """The calibrated rig: ``transforms[name]`` is ``reference_from_<name>`` (4x4) after the
     pose-graph refinement; ``direct[name]`` the direct calibration to the reference (missing
@@ -150,6 +167,8 @@ class RigCalibration:
     failure_kinds: dict[tuple[str, str], str | None] = field(default_factory=dict)
     #: Targets no calibration connects to the reference (only with ``require_all=False``).
     unconnected: list[str] = field(default_factory=list)
+    #: How the pose-graph refinement went (always set by :func:`calibrate_rig`).
+    pose_graph: PoseGraphReport | None = None
 
 
 def refine_pose_graph(
@@ -252,4 +271,5 @@ def calibrate_rig(
         failures=dict(out["failures"]),
         failure_kinds=dict(out["failure_kinds"]),
         unconnected=list(out["unconnected"]),
+        pose_graph=PoseGraphReport(**out["pose_graph"]),
     )

@@ -7,13 +7,21 @@
 //! * [`targetless`]: the planes of an ordinary scene (a street), matched by plane pairs and
 //!   triplets without an initial guess, verified and refined by point-to-plane ICP; refuses
 //!   scenes that leave a degree of freedom unobserved.
-//! * [`rig`]: one entry point over the three ([`rig::Method::Auto`] keeps the best-fitting
-//!   result) and the calibration of a whole rig, made consistent by a small pose graph.
+//! * [`method`]: one entry point over the three ([`calibrate`]; [`Method::Auto`] keeps the
+//!   best-fitting certified result).
+//! * [`rig`]: the calibration of a whole rig ([`calibrate_rig`]), made consistent by a small pose
+//!   graph ([`crate::pose_graph`]).
+//!
+//! The entry points of [`method`] and [`rig`] are re-exported here.
 
+pub mod method;
 pub mod planes;
 pub mod poles;
 pub mod rig;
 pub mod targetless;
+
+pub use method::{calibrate, Calibration, Cloud, Method, MethodOptions};
+pub use rig::{calibrate_rig, RigCalibration, RigOptions};
 
 use std::time::Instant;
 

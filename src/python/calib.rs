@@ -9,19 +9,23 @@ use pyo3::types::PyDict;
 
 use super::arrays::{self, row_major, to_numpy};
 use super::run;
+use crate::calib::method::{self, Calibration, Cloud, Method, MethodOptions};
 use crate::calib::planes::{
     calibrate_planes as rs_calibrate_planes, PlanarCalibration, PlanarOptions,
 };
 use crate::calib::poles::{
     calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
 };
-use crate::calib::rig::{self, Calibration, Cloud, Method, MethodOptions, RigOptions};
+use crate::calib::rig::{self, RigOptions};
 use crate::calib::targetless::{
     calibrate_targetless as rs_calibrate_targetless, TargetlessCalibration, TargetlessOptions,
 };
 use crate::calib::Timings;
 use crate::geometry::Plane;
 use crate::lm::{LmOptions, LmReport, Loss};
+use crate::pose_graph::{
+    refine_pose_graph as rs_refine_pose_graph, PoseGraphEdge, PoseGraphOptions,
+};
 
 /// What a calibration method returned (the crate's own sum of the three results).
 type Inner = Calibration;
@@ -833,7 +837,7 @@ fn calibrate_auto(
     let reference = owned_cloud(reference, "reference")?;
     let target = owned_cloud(target, "target")?;
     let inner = run(py, move || {
-        rig::calibrate(
+        method::calibrate(
             borrow_cloud(&reference)?,
             borrow_cloud(&target)?,
             Method::Auto,
@@ -847,7 +851,8 @@ fn calibrate_auto(
 /// (name, cloud); the method options as for calibrate_auto. Returns a dict: "transforms" and
 /// "direct" ({name: (4, 4)}), "edges" (a list of (a, b, method, a_from_b,
 /// rotation_residual_deg, translation_residual_m, CalibrationResult)), "failures"
-/// ({(a, b): reason}) and "unconnected" (names).
+/// ({(a, b): reason}), "unconnected" (names) and "pose_graph" (the refinement's report: a dict of
+/// converged, termination, iterations, initial_cost, final_cost).
 #[pyfunction]
 #[pyo3(signature = (reference, targets, *, method="auto", pairwise=true, require_all=true, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
@@ -928,6 +933,14 @@ fn calibrate_rig<'py>(
     d.set_item("failures", failures)?;
     d.set_item("failure_kinds", failure_kinds)?;
     d.set_item("unconnected", out.unconnected)?;
+    let report = out.pose_graph;
+    let graph = PyDict::new(py);
+    graph.set_item("converged", report.converged)?;
+    graph.set_item("termination", report.termination.as_str())?;
+    graph.set_item("iterations", report.iterations)?;
+    graph.set_item("initial_cost", report.initial_cost)?;
+    graph.set_item("final_cost", report.final_cost)?;
+    d.set_item("pose_graph", graph)?;
     Ok(d)
 }
 
@@ -959,7 +972,7 @@ fn refine_pose_graph<'py>(
                 &format!("edges[{k}] a_from_b"),
             )?)?;
             let w = arrays::matrix(w, &format!("edges[{k}] information"), 6, 6)?;
-            Ok(rig::PoseGraphEdge {
+            Ok(PoseGraphEdge {
                 a: *a,
                 b: *b,
                 a_from_b: z,
@@ -967,10 +980,12 @@ fn refine_pose_graph<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
-    let refined = run(py, move || {
-        rig::refine_pose_graph(&poses, &edges, iterations)
-    })?;
-    refined.iter().map(|p| matrix4(py, p)).collect()
+    let options = PoseGraphOptions {
+        max_iterations: iterations,
+        ..PoseGraphOptions::default()
+    };
+    let refined = run(py, move || rs_refine_pose_graph(&poses, &edges, &options))?;
+    refined.poses.iter().map(|p| matrix4(py, p)).collect()
 }
 
 /// Fraction of target points that land within `distance` of a reference point under
@@ -1014,8 +1029,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate_rig, m)?)?;
     m.add_function(wrap_pyfunction!(refine_pose_graph, m)?)?;
     m.add_function(wrap_pyfunction!(overlap, m)?)?;
-    m.add("AGREEMENT_DISTANCE", rig::AGREEMENT_DISTANCE)?;
-    m.add("AUTO_TIE", rig::AUTO_TIE)?;
+    m.add("AGREEMENT_DISTANCE", method::AGREEMENT_DISTANCE)?;
+    m.add("AUTO_TIE", method::AUTO_TIE)?;
     m.add("MIN_PAIR_OVERLAP", rig::MIN_PAIR_OVERLAP)?;
     m.add(
         "MAX_BRIGHT_FRACTION",

@@ -1,5 +1,6 @@
 """lidarcal.refine_pose_graph (Rust, central differences, halving line search) against the NumPy
-reference (forward differences, plain Gauss-Newton), and its argument checks."""
+reference (forward differences, plain Gauss-Newton), its argument checks, and the pose-graph
+report of calibrate_rig."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 
 import lidarcal
 import reference as ref
+from lidarcal import sim
 
 
 def _random_pose(rng: np.random.Generator, t_scale: float, r_scale: float) -> np.ndarray:
@@ -118,3 +120,20 @@ def test_cost_never_rises_on_a_weakly_constrained_graph() -> None:
     assert costs[-1] < 0.1 * costs[0]
     plain = [cost(ref.refine_pose_graph(start, weak, k)) for k in range(1, 8)]
     assert any(b > a for a, b in itertools.pairwise(plain)), plain
+
+
+def test_rig_reports_its_pose_graph() -> None:
+    """calibrate_rig's result says how the pose-graph refinement went: a simulated roof unit and
+    two side units of one street, every edge consistent to the noise, so the graph settles."""
+    left = sim.street_scene(seed=0, side="left")
+    right = sim.street_scene(seed=0, side="right")
+    rig = lidarcal.calibrate_rig(
+        left.reference, {"left": left.target, "right": right.target}, method="targetless"
+    )
+    report = rig.pose_graph
+    assert isinstance(report, lidarcal.PoseGraphReport)
+    assert report.converged is True
+    assert report.termination in ("step_tolerance", "no_further_decrease")
+    assert isinstance(report.iterations, int) and 0 < report.iterations <= 20
+    assert np.isfinite(report.initial_cost) and np.isfinite(report.final_cost)
+    assert 0.0 <= report.final_cost <= report.initial_cost

@@ -1,0 +1,417 @@
+//! One entry point over the calibration methods: [`calibrate`] runs the method you name, or for
+//! [`Method::Auto`] every applicable one and keeps the best certified result.
+//!
+//! For [`Method::Auto`] it runs the corner method, the targetless plane matching and (when both
+//! clouds carry intensity) the taped poles. Every result has passed [`crate::check`]; `auto` keeps
+//! the one with the best certificate (agreement less free-space violations), or the earliest
+//! method whose pose is the best's within what the checks detect (the corner method's exact pose
+//! over a targetless one 1 cm away that scores 0.01 higher), and refuses with
+//! [`FailureKind::InconsistentMethods`] when two certified results disagree beyond their tolerance
+//! and their certificates are within [`AUTO_MARGIN`]. A method that fails with
+//! [`Error::Calibration`] is skipped (its reason and kind are kept for the error when none
+//! succeeds); malformed input is returned at once.
+//!
+//! Several sensors at once are [`crate::calib::rig`]'s business; it calls [`calibrate`] per pair.
+//!
+//! ```
+//! use lidarcal::calib::method::{calibrate, Cloud, Method, MethodOptions};
+//! use lidarcal::sim::scenes::{street_scene, StreetOptions};
+//!
+//! let scene = street_scene(&StreetOptions::default())?;
+//! let (reference, target) = (scene.reference.positions(), scene.target.positions());
+//! let result = calibrate(
+//!     Cloud::new(&reference),
+//!     Cloud::new(&target),
+//!     Method::Auto,
+//!     &MethodOptions::default(),
+//! )?;
+//! let truth = &scene.reference_from_target;
+//! let (angle, distance) =
+//!     lidarcal::calib::targetless::pose_error(truth, result.reference_from_target());
+//! assert!(angle.to_degrees() < 0.1 && distance < 0.02);
+//! println!("{} chose {}", Method::Auto.name(), result.method().name());
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+
+use nalgebra::{Isometry3, Matrix6, Point3};
+
+use crate::calib::planes::{calibrate_planes, PlanarCalibration, PlanarOptions};
+use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
+use crate::calib::targetless::pose_error;
+use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
+use crate::check::CheckReport;
+use crate::{Error, FailureKind, Result};
+
+/// Distance (m) within which a mapped target point counts as agreeing with the reference cloud,
+/// for the overlap test of a target pair in [`calibrate_rig`](crate::calib::rig::calibrate_rig)
+/// ([`Method::Auto`] ranks by the check's certificate instead).
+pub const AGREEMENT_DISTANCE: f64 = 0.25;
+
+/// [`Method::Auto`] prefers the earlier method (corner, targetless, poles) when its certificate
+/// score is within this of the best (or its pose within the checks' detectable error of the
+/// best's).
+pub const AUTO_TIE: f64 = 0.01;
+
+/// When two methods pass the check but disagree beyond their tolerance, [`Method::Auto`] keeps
+/// the better one only when its certificate score (agreement less violations, both ways) is ahead
+/// by at least this; otherwise it refuses with [`FailureKind::InconsistentMethods`].
+pub const AUTO_MARGIN: f64 = 0.1;
+
+/// Which calibration method to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Every applicable method; the result that fits best.
+    #[default]
+    Auto,
+    /// Three planes of a wall corner ([`crate::calib::planes`]).
+    Planes,
+    /// The planes of an ordinary scene ([`crate::calib::targetless`]).
+    Targetless,
+    /// Taped poles, from intensity ([`crate::calib::poles`]).
+    Poles,
+}
+
+impl Method {
+    /// `"auto"`, `"planes"`, `"targetless"` or `"poles"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Auto => "auto",
+            Method::Planes => "planes",
+            Method::Targetless => "targetless",
+            Method::Poles => "poles",
+        }
+    }
+
+    /// The method of that [`name`](Method::name); `Err(InvalidInput)` naming the choices otherwise.
+    pub fn from_name(name: &str) -> Result<Method> {
+        match name {
+            "auto" => Ok(Method::Auto),
+            "planes" => Ok(Method::Planes),
+            "targetless" => Ok(Method::Targetless),
+            "poles" => Ok(Method::Poles),
+            other => Err(Error::InvalidInput(format!(
+                "method must be 'auto', 'planes', 'targetless' or 'poles', got {other:?}"
+            ))),
+        }
+    }
+}
+
+/// One sensor's cloud in its own frame, with intensities when it has them (the poles need them).
+#[derive(Debug, Clone, Copy)]
+pub struct Cloud<'a> {
+    points: &'a [Point3<f64>],
+    intensity: Option<&'a [f64]>,
+}
+
+impl<'a> Cloud<'a> {
+    /// A cloud without intensity.
+    pub fn new(points: &'a [Point3<f64>]) -> Self {
+        Cloud {
+            points,
+            intensity: None,
+        }
+    }
+
+    /// A cloud with one intensity per point; `Err(InvalidInput)` when the lengths differ.
+    pub fn with_intensity(points: &'a [Point3<f64>], intensity: &'a [f64]) -> Result<Self> {
+        if points.len() != intensity.len() {
+            return Err(Error::InvalidInput(format!(
+                "{} points but {} intensities",
+                points.len(),
+                intensity.len()
+            )));
+        }
+        Ok(Cloud {
+            points,
+            intensity: Some(intensity),
+        })
+    }
+
+    /// The points.
+    pub fn points(&self) -> &'a [Point3<f64>] {
+        self.points
+    }
+
+    /// The intensities, if any.
+    pub fn intensity(&self) -> Option<&'a [f64]> {
+        self.intensity
+    }
+}
+
+/// What one method returned.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Calibration {
+    /// The corner method's result.
+    Planes(Box<PlanarCalibration>),
+    /// The targetless method's result.
+    Targetless(Box<TargetlessCalibration>),
+    /// The pole method's result.
+    Poles(Box<PoleCalibration>),
+}
+
+impl Calibration {
+    /// The method that produced it (never [`Method::Auto`]).
+    pub fn method(&self) -> Method {
+        match self {
+            Calibration::Planes(_) => Method::Planes,
+            Calibration::Targetless(_) => Method::Targetless,
+            Calibration::Poles(_) => Method::Poles,
+        }
+    }
+
+    /// `reference_from_target`.
+    pub fn reference_from_target(&self) -> &Isometry3<f64> {
+        match self {
+            Calibration::Planes(c) => &c.reference_from_target,
+            Calibration::Targetless(c) => &c.reference_from_target,
+            Calibration::Poles(c) => &c.reference_from_target,
+        }
+    }
+
+    /// The final check's report (consistent for every returned result).
+    pub fn check(&self) -> &CheckReport {
+        match self {
+            Calibration::Planes(c) => &c.check,
+            Calibration::Targetless(c) => &c.check,
+            Calibration::Poles(c) => &c.check,
+        }
+    }
+
+    /// Covariance of the left-perturbation tangent `[rho, phi]`, when the method gives one.
+    pub fn covariance(&self) -> Option<Matrix6<f64>> {
+        match self {
+            Calibration::Planes(c) => c.covariance,
+            Calibration::Targetless(c) => c.covariance,
+            Calibration::Poles(c) => c.covariance,
+        }
+    }
+}
+
+/// The options of every method, and how [`Method::Auto`] compares their results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MethodOptions {
+    /// For [`Method::Planes`].
+    pub planes: PlanarOptions,
+    /// For [`Method::Targetless`].
+    pub targetless: TargetlessOptions,
+    /// For [`Method::Poles`].
+    pub poles: PoleOptions,
+    /// See [`AGREEMENT_DISTANCE`].
+    pub agreement_distance: f64,
+    /// See [`AUTO_TIE`].
+    pub auto_tie: f64,
+    /// See [`AUTO_MARGIN`].
+    pub auto_margin: f64,
+}
+
+impl Default for MethodOptions {
+    fn default() -> Self {
+        MethodOptions {
+            planes: PlanarOptions::default(),
+            targetless: TargetlessOptions::default(),
+            poles: PoleOptions::default(),
+            agreement_distance: AGREEMENT_DISTANCE,
+            auto_tie: AUTO_TIE,
+            auto_margin: AUTO_MARGIN,
+        }
+    }
+}
+
+impl MethodOptions {
+    /// The defaults with `seed` for every method.
+    pub fn with_seed(seed: u64) -> Self {
+        let mut o = MethodOptions::default();
+        o.planes.seed = seed;
+        o.targetless.seed = seed;
+        o.poles.seed = seed;
+        o
+    }
+}
+
+fn run_one(
+    reference: Cloud<'_>,
+    target: Cloud<'_>,
+    method: Method,
+    options: &MethodOptions,
+) -> Result<Calibration> {
+    match method {
+        Method::Planes => calibrate_planes(reference.points, target.points, &options.planes)
+            .map(|c| Calibration::Planes(Box::new(c))),
+        Method::Targetless => {
+            calibrate_targetless(reference.points, target.points, &options.targetless)
+                .map(|c| Calibration::Targetless(Box::new(c)))
+        }
+        Method::Poles => match (reference.intensity, target.intensity) {
+            (Some(ri), Some(ti)) => {
+                calibrate_poles(reference.points, ri, target.points, ti, &options.poles)
+                    .map(|c| Calibration::Poles(Box::new(c)))
+            }
+            _ => Err(Error::InvalidInput(
+                "the pole method needs the intensity of both clouds".into(),
+            )),
+        },
+        Method::Auto => auto(reference, target, options),
+    }
+}
+
+/// Calibrates `reference_from_target` with one method, or with the best-fitting of all for
+/// [`Method::Auto`] (see the [module docs](self)). Errors: malformed input at once;
+/// `Err(Calibration)` listing each method's reason when none succeeds.
+pub fn calibrate(
+    reference: Cloud<'_>,
+    target: Cloud<'_>,
+    method: Method,
+    options: &MethodOptions,
+) -> Result<Calibration> {
+    if !(options.agreement_distance.is_finite() && options.agreement_distance > 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "agreement_distance must be finite and positive, got {}",
+            options.agreement_distance
+        )));
+    }
+    if !(options.auto_margin.is_finite() && options.auto_margin >= 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "auto_margin must be finite and non-negative, got {}",
+            options.auto_margin
+        )));
+    }
+    if !(options.auto_tie.is_finite() && options.auto_tie >= 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "auto_tie must be finite and non-negative, got {}",
+            options.auto_tie
+        )));
+    }
+    run_one(reference, target, method, options)
+}
+
+fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Result<Calibration> {
+    let mut candidates = vec![Method::Planes, Method::Targetless];
+    if reference.intensity.is_some() && target.intensity.is_some() {
+        candidates.push(Method::Poles);
+    }
+    let mut results = Vec::new();
+    let mut reasons = Vec::new();
+    for method in candidates {
+        match run_one(reference, target, method, options) {
+            Ok(c) => results.push(c),
+            Err(Error::Calibration { kind, message }) => {
+                reasons.push((kind, format!("{}: {message}", method.name())))
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    if results.is_empty() {
+        return Err(no_method_error(&reasons));
+    }
+    if results.len() == 1 {
+        return Ok(results.remove(0));
+    }
+    // Every result passed its method's check. Rank them by the certificate (the noise scale of
+    // the agreement comes from the clouds alone, so the reports compare directly).
+    let reports: Vec<&CheckReport> = results.iter().map(Calibration::check).collect();
+    let scores: Vec<f64> = reports.iter().map(|r| certificate_score(r)).collect();
+    // Whether results `i` and `j` differ by more than either check can detect.
+    let disagree = |i: usize, j: usize| {
+        let (angle, distance) = pose_error(
+            results[i].reference_from_target(),
+            results[j].reference_from_target(),
+        );
+        let (a, b) = (reports[i], reports[j]);
+        angle > a.detectable_rotation.max(b.detectable_rotation)
+            || distance > a.detectable_translation.max(b.detectable_translation)
+    };
+    // The earliest method (the one made for the scene) whose score ties the best, or whose pose
+    // is the best's within what the checks detect: a targetless pose 1 cm from the corner
+    // method's exact one can score 0.01 higher on the same corner.
+    let top = (0..scores.len())
+        .max_by(|&a, &b| scores[a].total_cmp(&scores[b]).then(b.cmp(&a)))
+        .unwrap_or(0);
+    let pick = (0..scores.len())
+        .find(|&i| scores[i] >= scores[top] - options.auto_tie || !disagree(i, top))
+        .unwrap_or(top);
+    for (i, other) in results.iter().enumerate() {
+        let (chosen, rival) = (reports[pick], reports[i]);
+        let (angle, distance) = pose_error(
+            results[pick].reference_from_target(),
+            other.reference_from_target(),
+        );
+        let rotation_tolerance = chosen.detectable_rotation.max(rival.detectable_rotation);
+        let translation_tolerance = chosen
+            .detectable_translation
+            .max(rival.detectable_translation);
+        if disagree(pick, i) && scores[pick] - scores[i] < options.auto_margin {
+            return Err(Error::calibration(
+                FailureKind::InconsistentMethods,
+                format!(
+                    "the {} and {} methods both passed the check but disagree by {:.2} deg / \
+                     {:.1} cm (beyond their tolerance of {:.2} deg / {:.1} cm), and their \
+                     certificates do not separate them (scores {:.3} and {:.3}, need a margin of \
+                     {}): the scene fits two poses; calibrate with one method, or add structure",
+                    results[pick].method().name(),
+                    other.method().name(),
+                    angle.to_degrees(),
+                    distance * 100.0,
+                    rotation_tolerance.to_degrees(),
+                    translation_tolerance * 100.0,
+                    scores[pick],
+                    scores[i],
+                    options.auto_margin
+                ),
+            ));
+        }
+    }
+    Ok(results.swap_remove(pick))
+}
+
+/// How well a certified pose fits: the smaller of the two agreements (points within `3 sigma` of
+/// the other cloud's surface) less the larger free-space violation share.
+fn certificate_score(report: &CheckReport) -> f64 {
+    report.agreement.min(report.reverse_agreement)
+        - report.violations.max(report.reverse_violations)
+}
+
+/// The error when every method of [`Method::Auto`] refused: the kind of the method that got
+/// furthest (a scene found ambiguous or unobservable says more than another method's missing
+/// features), every method's reason in the message.
+fn no_method_error(reasons: &[(FailureKind, String)]) -> Error {
+    let rank = |k: FailureKind| match k {
+        FailureKind::InconsistentMethods => 0,
+        FailureKind::Ambiguous => 1,
+        FailureKind::Unobservable => 2,
+        FailureKind::OutOfRange => 3,
+        FailureKind::NoAgreement => 4,
+        FailureKind::TimeBudget => 5,
+        FailureKind::TooFewFeatures => 6,
+    };
+    let kind = reasons
+        .iter()
+        .map(|(k, _)| *k)
+        .min_by_key(|k| rank(*k))
+        .unwrap_or(FailureKind::TooFewFeatures);
+    let text: Vec<&str> = reasons.iter().map(|(_, m)| m.as_str()).collect();
+    Error::calibration(
+        kind,
+        format!("no method calibrated this pair ({})", text.join("; ")),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn method_names_round_trip() {
+        for m in [
+            Method::Auto,
+            Method::Planes,
+            Method::Targetless,
+            Method::Poles,
+        ] {
+            assert_eq!(Method::from_name(m.name()), Ok(m));
+        }
+        assert!(matches!(
+            Method::from_name("icp"),
+            Err(Error::InvalidInput(m)) if m.contains("'targetless'")
+        ));
+    }
+}
