@@ -26,8 +26,8 @@
 //! * [`icp`]: voxel downsampling, surface normals and robust point-to-plane ICP.
 //! * [`visibility`]: free-space consistency of two scans (range images), which tells a wrong pose
 //!   from the truth when point agreement cannot.
-//! * [`sim`]: a scan simulator (VLP-16, HDL-32E, HDL-64E, OS1-128; walls, boxes, taped poles,
-//!   streets) with ground-truth scenes.
+//! * `sim` (feature `sim`): a scan simulator (VLP-16, HDL-32E, HDL-64E, OS1-128; walls, boxes,
+//!   taped poles, streets) with ground-truth scenes.
 //! * [`budget`]: wall-clock limits for the long-running stages.
 //! * `io` (feature `io`): PCD, PLY, KITTI `.bin`, `.npy` and CSV/TXT point clouds.
 //!
@@ -35,11 +35,13 @@
 //! * `parallel` (default): rayon in residual accumulation. Results are bit-identical with or
 //!   without it and for any thread count.
 //! * `io` (default): point-cloud file formats.
-//! * `python`: the PyO3 extension module; only maturin turns it on.
+//! * `sim` (default): the scan simulator, `lidarcal::sim` (adds rand_distr).
+//! * `python`: the PyO3 extension module (implies `io` and `sim`); only maturin turns it on.
 //!
-//! With `default-features = false` the crate depends on nalgebra, rand (with rand_chacha and
-//! rand_distr), kiddo, rustc-hash and thiserror only (no rayon, no pyo3), never panics
-//! on bad input (every fallible function returns [`Result`]) and holds no global state.
+//! With `default-features = false` the crate is the calibration methods and what they are built
+//! on, without the simulator or file formats. It depends on nalgebra, rand (with rand_chacha),
+//! kiddo, rustc-hash and thiserror only (no rayon, no pyo3), never panics on bad input (every
+//! fallible function returns [`Result`]) and holds no global state.
 //!
 //! ## Example: recover a pose from three planes
 //! ```
@@ -89,8 +91,10 @@ pub mod lm;
 pub mod metrics;
 pub mod ransac;
 pub mod residuals;
-pub mod sim;
 pub mod visibility;
+
+#[cfg(feature = "sim")]
+pub mod sim;
 
 #[cfg(feature = "io")]
 pub mod io;
@@ -119,9 +123,10 @@ where
     }
 }
 
-/// The README's Rust examples, compiled and run as doctests so they cannot rot.
+/// The README's Rust examples, compiled and run as doctests so they cannot rot. They use the
+/// simulator, so they run with feature `sim` (a default feature).
 #[doc = include_str!("../README.md")]
-#[cfg(doctest)]
+#[cfg(all(doctest, feature = "sim"))]
 pub struct ReadmeDoctests;
 pub use geometry::{Line, Plane};
 pub use kabsch::{kabsch, KabschSolution};

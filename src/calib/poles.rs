@@ -81,7 +81,8 @@
 //!   side; without one it is left out.
 //!
 //! # Example
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::calib::poles::{calibrate_poles, PoleOptions, Vendor};
 //! use lidarcal::sim::scenes::{poles_scene, PolesOptions};
 //! use lidarcal::sim::{BeamModel, Preset};

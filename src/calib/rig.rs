@@ -15,7 +15,8 @@
 //!   (Gauss–Newton on the SE(3) tangent errors, each edge weighted by its information matrix,
 //!   with a step halved whenever it would raise the cost).
 //!
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::calib::rig::{calibrate, Cloud, Method, MethodOptions};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
 //!
