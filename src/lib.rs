@@ -43,6 +43,41 @@
 //! kiddo, rustc-hash and thiserror only (no rayon, no pyo3), never panics on bad input (every
 //! fallible function returns [`Result`]) and holds no global state.
 //!
+//! ## Quick start: calibrate a simulated corner (feature `sim`)
+//! Two VLP-16s at a building corner, the transform found from the three planes without an
+//! initial guess, and compared with the simulator's ground truth
+//! (`cargo run --example quickstart` prints the errors):
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
+//! use lidarcal::calib::planes::{calibrate_planes, PlanarOptions};
+//! use lidarcal::sim::scenes::{corner_scene, CornerOptions};
+//! use lidarcal::sim::{BeamModel, Preset};
+//! use lidarcal::{Error, FailureKind};
+//! use nalgebra::Vector3;
+//!
+//! // Two walls at 90 degrees and the ground, 4 clutter boxes; the target tilted and turned.
+//! let scene = corner_scene(&BeamModel::preset(Preset::Vlp16), &CornerOptions::default())?;
+//! let (reference, target) = (scene.reference.positions(), scene.target.positions());
+//!
+//! // A right-angled corner is a cube corner: a 120-degree turn about its diagonal maps the three
+//! // planes onto each other, so without a tie-break the method refuses rather than guess...
+//! let refused = calibrate_planes(&reference, &target, &PlanarOptions::default());
+//! assert!(matches!(refused, Err(Error::Calibration { kind: FailureKind::Ambiguous, .. })));
+//! // ...and `up`, the gravity direction in each sensor's frame, breaks the tie. Both sensors
+//! // stand roughly upright (tilts under 10 degrees), so it is +z in both.
+//! let options = PlanarOptions {
+//!     up: Some((Vector3::z(), Vector3::z())),
+//!     ..PlanarOptions::default()
+//! };
+//! let result = calibrate_planes(&reference, &target, &options)?;
+//!
+//! let (truth, estimate) = (scene.reference_from_target, result.reference_from_target);
+//! let rotation_error_deg = (truth.rotation * estimate.rotation.inverse()).angle().to_degrees();
+//! let translation_error_m = (truth.translation.vector - estimate.translation.vector).norm();
+//! assert!(rotation_error_deg < 0.05 && translation_error_m < 0.005);
+//! # Ok::<(), lidarcal::Error>(())
+//! ```
+//!
 //! ## Example: recover a pose from three planes
 //! ```
 //! use lidarcal::geometry::{se3_exp, Plane};
