@@ -42,7 +42,8 @@
 //!   in space the other sensor saw through (the truth: none); the reason then says so.
 //! * [`Verdict::Consistent`]: none of these.
 //!
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::check::{check, CheckOptions, Verdict};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
 //! use nalgebra::Translation3;

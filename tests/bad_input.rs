@@ -2,17 +2,24 @@
 //! through Python): every case returns the right `Error` variant with a message saying what is
 //! wrong, and nothing panics.
 
-use std::time::Duration;
-
-use lidarcal::calib::planes::{calibrate_planes, PlanarOptions};
-use lidarcal::calib::poles::{calibrate_poles, PoleOptions};
+#[cfg(feature = "io")]
 use lidarcal::io::pcd::PcdFormat;
 use lidarcal::kabsch::kabsch;
-use lidarcal::sim::scenes::{corner_scene, poles_scene, CornerOptions, PolesOptions};
-use lidarcal::sim::BeamModel;
+#[cfg(any(feature = "sim", feature = "io"))]
 use lidarcal::Error;
-use nalgebra::{Point3, Rotation3, Vector3};
+use nalgebra::{Rotation3, Vector3};
+// The calibrations' bad-input cases start from simulated scenes.
+#[cfg(feature = "sim")]
+use {
+    lidarcal::calib::planes::{calibrate_planes, PlanarOptions},
+    lidarcal::calib::poles::{calibrate_poles, PoleOptions},
+    lidarcal::sim::scenes::{corner_scene, poles_scene, CornerOptions, PolesOptions},
+    lidarcal::sim::BeamModel,
+    nalgebra::Point3,
+    std::time::Duration,
+};
 
+#[cfg(feature = "sim")]
 fn corner() -> (Vec<Point3<f64>>, Vec<Point3<f64>>) {
     let model = BeamModel::from_name("vlp16").unwrap();
     let scene = corner_scene(
@@ -27,10 +34,12 @@ fn corner() -> (Vec<Point3<f64>>, Vec<Point3<f64>>) {
     (scene.reference.positions(), scene.target.positions())
 }
 
+#[cfg(feature = "sim")]
 fn message_of<T: std::fmt::Debug>(r: lidarcal::Result<T>) -> Error {
     r.expect_err("the input must be refused")
 }
 
+#[cfg(any(feature = "sim", feature = "io"))]
 fn assert_variant(e: &Error, invalid_input: bool, fragment: &str) {
     let is_invalid = matches!(e, Error::InvalidInput(_));
     let is_calibration = matches!(e, Error::Calibration { .. });
@@ -45,6 +54,7 @@ fn assert_variant(e: &Error, invalid_input: bool, fragment: &str) {
     assert!(e.to_string().contains(fragment), "{e}");
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn planes_refuse_bad_clouds_with_clear_errors() {
     let (reference, target) = corner();
@@ -84,6 +94,7 @@ fn planes_refuse_bad_clouds_with_clear_errors() {
     }
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn a_spent_time_budget_stops_the_calibration_and_a_generous_one_changes_nothing() {
     let (reference, target) = corner();
@@ -102,6 +113,7 @@ fn a_spent_time_budget_stops_the_calibration_and_a_generous_one_changes_nothing(
     assert_eq!(free.reference_from_target, limited.reference_from_target);
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn poles_refuse_mismatched_and_far_input() {
     let model = BeamModel::from_name("vlp16").unwrap();

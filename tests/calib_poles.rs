@@ -1,5 +1,6 @@
 //! The pole method on simulated scenes with ground truth: the 20-scene protocol, radii 0.05–0.3 m,
 //! tilt up to 30 deg, an upside-down sensor, a bright distractor, three poles, and the errors.
+#![cfg(feature = "sim")]
 
 use lidarcal::calib::poles::{calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor};
 use lidarcal::sim::scenes::{poles_scene, PolesOptions, Scene, POLE_PAINT};

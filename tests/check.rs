@@ -1,4 +1,5 @@
 //! `lidarcal::check`: verdicts on simulated scenes with known truth, the gate `certify`, bad input.
+#![cfg(feature = "sim")]
 
 use lidarcal::check::{certify, check, CheckOptions, PreparedPair, Verdict};
 use lidarcal::sim::scenes::{corridor_scene, street_scene, StreetOptions};

@@ -1,22 +1,29 @@
 //! `calib::method` and `calib::rig`: `Method::Auto` on the three kinds of simulated scene, and
 //! `calibrate_rig` on a street seen by a roof unit and two tilted side units.
 
-use lidarcal::calib::targetless;
-use lidarcal::calib::{calibrate, calibrate_rig, Cloud, Method, MethodOptions, RigOptions};
-
-/// (rotation error in degrees, translation error in metres).
-fn pose_error(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> (f64, f64) {
-    let (angle, dist) = targetless::pose_error(a, b);
-    (angle.to_degrees(), dist)
-}
-use lidarcal::sim::beams::{BeamModel, Preset};
-use lidarcal::sim::scenes::{
-    corner_scene, poles_scene, street_scene, CornerOptions, PolesOptions, Side, StreetOptions,
-};
-use lidarcal::sim::Scan;
+use lidarcal::calib::{calibrate, Cloud, Method, MethodOptions};
 use lidarcal::Error;
 use nalgebra::Point3;
+// All but the featureless-ground case are simulated scenes.
+#[cfg(feature = "sim")]
+use {
+    lidarcal::calib::{calibrate_rig, RigOptions},
+    lidarcal::geometry::pose_error as geometry_pose_error,
+    lidarcal::sim::beams::{BeamModel, Preset},
+    lidarcal::sim::scenes::{
+        corner_scene, poles_scene, street_scene, CornerOptions, PolesOptions, Side, StreetOptions,
+    },
+    lidarcal::sim::Scan,
+};
 
+/// (rotation error in degrees, translation error in metres).
+#[cfg(feature = "sim")]
+fn pose_error(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> (f64, f64) {
+    let (angle, dist) = geometry_pose_error(a, b);
+    (angle.to_degrees(), dist)
+}
+
+#[cfg(feature = "sim")]
 fn street(side: Side) -> lidarcal::sim::scenes::Scene {
     street_scene(&StreetOptions {
         side,
@@ -25,10 +32,12 @@ fn street(side: Side) -> lidarcal::sim::scenes::Scene {
     .unwrap()
 }
 
+#[cfg(feature = "sim")]
 fn intensities(scan: &Scan) -> Vec<f64> {
     scan.points.iter().map(|p| p.intensity).collect()
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn auto_picks_the_corner_method_at_a_corner_and_targetless_on_a_street() {
     let model = BeamModel::preset(Preset::Vlp16);
@@ -58,6 +67,7 @@ fn auto_picks_the_corner_method_at_a_corner_and_targetless_on_a_street() {
     assert!(c.covariance().is_some());
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn auto_tries_the_poles_only_with_intensity() {
     let model = BeamModel::preset(Preset::Vlp16);
@@ -142,6 +152,7 @@ fn auto_lists_every_reason_and_passes_malformed_input_through() {
     ));
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn rig_of_a_roof_unit_and_two_side_units() {
     let (left, right) = (street(Side::Left), street(Side::Right));
@@ -184,6 +195,7 @@ fn rig_of_a_roof_unit_and_two_side_units() {
     assert!(report.iterations > 0 && report.final_cost <= report.initial_cost);
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn rig_argument_errors() {
     let s = street(Side::Left);

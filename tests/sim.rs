@@ -1,6 +1,7 @@
 //! The scan simulator against geometry it must reproduce: ring elevations over a ground plane,
 //! hits on a cylinder's surface, scene ground truth, determinism across thread counts, and the
 //! pole-axis study's qualitative result.
+#![cfg(feature = "sim")]
 
 use lidarcal::sim::scenes::{
     corner_scene, paper_scene, poles_scene, CornerOptions, PaperConfiguration, PaperOptions,

@@ -4,9 +4,14 @@
 mod common;
 
 use lidarcal::calib::targetless::{calibrate_targetless, pose_error, TargetlessOptions};
-use lidarcal::sim::scenes::{corridor_scene, street_scene, Side, StreetOptions};
-use lidarcal::Error;
+// All but the real pair are simulated scenes.
+#[cfg(feature = "sim")]
+use {
+    lidarcal::sim::scenes::{corridor_scene, street_scene, Side, StreetOptions},
+    lidarcal::Error,
+};
 
+#[cfg(feature = "sim")]
 fn street(seed: u64, side: Side) -> (f64, f64) {
     let scene = street_scene(&StreetOptions {
         seed,
@@ -40,6 +45,7 @@ fn street(seed: u64, side: Side) -> (f64, f64) {
     pose_error(&scene.reference_from_target, &r.reference_from_target)
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn tilted_side_units_on_a_street_without_initial_guess() {
     // Seeds whose street the method solves (see the module docs' limits for the others: a
@@ -55,6 +61,7 @@ fn tilted_side_units_on_a_street_without_initial_guess() {
     }
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn sensors_further_apart_than_max_translation_are_refused_not_replaced() {
     // The unit sits ~3 m back; with max_translation 2 m the truth is out of bounds. It is verified
@@ -96,6 +103,7 @@ fn sensors_further_apart_than_max_translation_are_refused_not_replaced() {
     ));
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn a_unit_three_metres_back_is_found_by_sliding_a_plane_pair() {
     // With two planes per cloud (the road and one facade) every hypothesis is a pair: the
@@ -132,6 +140,7 @@ fn a_unit_three_metres_back_is_found_by_sliding_a_plane_pair() {
     .is_err());
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn corridor_is_refused_with_the_direction() {
     let scene = corridor_scene(0).unwrap();
@@ -162,6 +171,7 @@ fn corridor_is_refused_with_the_direction() {
     assert!(x.abs() > 0.95, "{message}");
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn bad_input_is_rejected() {
     let few = vec![nalgebra::Point3::origin(); 10];

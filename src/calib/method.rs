@@ -13,7 +13,8 @@
 //!
 //! Several sensors at once are [`crate::calib::rig`]'s business; it calls [`calibrate`] per pair.
 //!
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::calib::method::{calibrate, Cloud, Method, MethodOptions};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
 //!
@@ -27,7 +28,7 @@
 //! )?;
 //! let truth = &scene.reference_from_target;
 //! let (angle, distance) =
-//!     lidarcal::calib::targetless::pose_error(truth, result.reference_from_target());
+//!     lidarcal::geometry::pose_error(truth, result.reference_from_target());
 //! assert!(angle.to_degrees() < 0.1 && distance < 0.02);
 //! println!("{} chose {}", Method::Auto.name(), result.method().name());
 //! # Ok::<(), lidarcal::Error>(())
@@ -37,9 +38,9 @@ use nalgebra::{Isometry3, Matrix6, Point3};
 
 use crate::calib::planes::{calibrate_planes, PlanarCalibration, PlanarOptions};
 use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
-use crate::calib::targetless::pose_error;
 use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
 use crate::check::CheckReport;
+use crate::geometry::pose_error;
 use crate::{Error, FailureKind, Result};
 
 /// Distance (m) within which a mapped target point counts as agreeing with the reference cloud,

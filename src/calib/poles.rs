@@ -81,7 +81,8 @@
 //!   side; without one it is left out.
 //!
 //! # Example
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::calib::poles::{calibrate_poles, PoleOptions, Vendor};
 //! use lidarcal::sim::scenes::{poles_scene, PolesOptions};
 //! use lidarcal::sim::{BeamModel, Preset};
@@ -101,7 +102,6 @@
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::targetless::pose_error;
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
 use crate::check::{CheckOptions, CheckReport, PreparedPair};
@@ -109,6 +109,7 @@ use crate::cluster::{euclidean_clusters_until, Grid};
 use crate::error::{ensure_positive, Error, FailureKind, Result};
 use crate::fit::cylinder::fit_cylinder;
 use crate::fit::Moments;
+use crate::geometry::pose_error;
 use crate::geometry::{Line, Plane};
 use crate::kabsch::kabsch;
 use crate::lm::{solve, LmOptions, LmReport, Loss};

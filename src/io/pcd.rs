@@ -35,7 +35,6 @@ use super::io_error;
 use super::table::{self, Layout, Scalar};
 use super::{Cloud, Fields};
 use crate::error::{Error, Result};
-use crate::sim::ScanPoint;
 
 /// The longest header the reader accepts, in bytes.
 const MAX_HEADER_BYTES: usize = 1 << 16;
@@ -586,16 +585,6 @@ pub struct PcdPoint {
     pub intensity: f64,
     /// Ring index (written as `U 2` only when requested).
     pub ring: u16,
-}
-
-impl From<&ScanPoint> for PcdPoint {
-    fn from(p: &ScanPoint) -> Self {
-        PcdPoint {
-            position: p.position,
-            intensity: p.intensity,
-            ring: p.ring,
-        }
-    }
 }
 
 /// Writes `points` (`x y z intensity` as `F 4`, and `ring` as `U 2` when `with_ring`) as PCD to

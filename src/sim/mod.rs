@@ -94,6 +94,18 @@ pub struct ScanPoint {
     pub shape: Option<usize>,
 }
 
+/// A simulated return as a PCD record (the file formats know nothing of the simulator).
+#[cfg(feature = "io")]
+impl From<&ScanPoint> for crate::io::pcd::PcdPoint {
+    fn from(p: &ScanPoint) -> Self {
+        crate::io::pcd::PcdPoint {
+            position: p.position,
+            intensity: p.intensity,
+            ring: p.ring,
+        }
+    }
+}
+
 /// The returns of one sensor, in the sensor frame.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Scan {

@@ -88,7 +88,8 @@
 //!   when it is too small.
 //!
 //! # Example
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::calib::targetless::{calibrate_targetless, TargetlessOptions};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
 //!
