@@ -328,11 +328,12 @@ pub(super) fn ambiguity_message(
     let (angle, distance) = runner_up.map_or((0.0, 0.0), |r| pose_error(&r.pose, &best.pose));
     if let Some((best_free, free_space)) = rivalry.slid {
         return format!(
-            "ambiguous: a copy of the best pose slid {distance:.2} m along a repeated \
-             structure (a colonnade, a row of posts) also passes the check and puts fewer \
-             points into the other sensor's free space ({:.1} % against {:.1} %), though the \
-             verification ranks it lower (scores {second_score:.3} and {best_score:.3}); add \
-             structure that breaks the repetition",
+            "ambiguous: a copy of the best pose slid {distance:.2} m along the direction its \
+             planes leave free also passes the check and puts fewer points into the other \
+             sensor's free space ({:.1} % against {:.1} %), though the verification ranks it \
+             lower (scores {second_score:.3} and {best_score:.3}); the scene may repeat itself \
+             along that direction (a colonnade, a row of posts or boxes): add structure that \
+             breaks the repetition",
             100.0 * free_space,
             100.0 * best_free
         );
