@@ -443,9 +443,10 @@ pub(super) fn slide_peaks(
 
 /// The slid copy of each plane-pair hypothesis (step 3 of the module docs): the pose moved along
 /// its free direction by the multiple of [`SLIDE_STEP`] (at least [`SLIDE_MIN`] and at most
-/// [`SLIDE_RANGE`] away, within `max_translation`) that scores best: the share of sampled target points that land in a
-/// [`SLIDE_CELL`] cell holding a reference point, minus [`VIOLATION_WEIGHT`] times the share that
-/// lands in space the reference saw through. A pair fixes the translation only across the
+/// [`SLIDE_RANGE`] away, within `max_translation`) that scores best ([`slide_scores`]) on the
+/// `field`: the share of sampled target points that land in a [`SLIDE_CELL`] cell holding a
+/// reference point, minus [`VIOLATION_WEIGHT`] times the share that lands in space the reference
+/// saw through. A pair fixes the translation only across the
 /// street; its minimum-norm start is as far from the truth as the sensors are apart along it,
 /// beyond the reach of ICP.
 pub(super) fn slides(

@@ -9,7 +9,7 @@
 //!    they continue one another, as an uneven road does, plus sequential RANSAC for the few scan
 //!    lines a tilted unit puts on a facade, which make no flat patch). Each keeps its inlier
 //!    count, centroid and extent ([`PlaneFeature`]). The inlier threshold is `3 sigma` of each
-//!    cloud's noise ([`estimate_threshold`]) unless given.
+//!    cloud's noise ([`estimate_threshold`](super::planes::estimate_threshold)) unless given.
 //! 3. **Hypotheses.** Two non-parallel planes fix the rotation: for every pair of reference planes
 //!    at least [`MIN_PAIR_ANGLE`] from parallel and every ordered pair of target planes whose
 //!    normals make the same angle (within [`TargetlessOptions::normal_tolerance`]), Kabsch on the
@@ -66,8 +66,8 @@
 //!    street.
 //! 5. **Refinement.** Every target plane that agrees with a reference plane at the winning pose is
 //!    matched; Levenberg–Marquardt minimises the symmetric point-to-plane cost over all matched
-//!    planes (exact per-plane sufficient statistics, [`PlaneMomentsProblem`]). Then, unless
-//!    disabled, point-to-plane ICP on the whole (downsampled) clouds ([`point_to_plane_icp`]),
+//!    planes (exact per-plane sufficient statistics, [`PlaneMomentsProblem`](crate::residuals::PlaneMomentsProblem)). Then, unless
+//!    disabled, point-to-plane ICP on the whole (downsampled) clouds ([`point_to_plane_icp`](crate::icp::point_to_plane_icp)),
 //!    with a shrinking correspondence distance and a Cauchy loss, so the part of each scan the
 //!    other sensor does not see drops out.
 //! 6. **Observability.** The calibration is refused when the data do not constrain all six

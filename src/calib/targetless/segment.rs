@@ -344,7 +344,7 @@ pub(super) fn merge_moments(a: &mut Moments, b: &Moments) {
     }
 }
 
-/// The planes [`calibrate_targetless`] extracts from one cloud (steps 1 and 2 of the module docs)
+/// The planes [`calibrate_targetless`](super::calibrate_targetless) extracts from one cloud (steps 1 and 2 of the module docs)
 /// and the inlier threshold used; feature voxel indices refer to the downsampled cloud.
 pub fn plane_features(
     points: &[Point3<f64>],

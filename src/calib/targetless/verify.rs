@@ -23,7 +23,7 @@ pub const VERIFY_REFERENCE_SAMPLES: usize = 2000;
 /// fall into space the other sensor saw through ([`crate::visibility`]).
 pub const VIOLATION_WEIGHT: f64 = 3.0;
 /// Pairs of the best pose and a close contender polished by the full ICP before the result is
-/// called ambiguous or not (see the verification in [`calibrate_targetless`]).
+/// called ambiguous or not (see the verification in [`calibrate_targetless`](super::calibrate_targetless)).
 pub const MAX_POLISHED: usize = 4;
 /// A challenger (beyond `max_translation`) makes the result ambiguous when it scores at least
 /// this share of the best (a pose within range does from [`AMBIGUITY_RATIO`]).
