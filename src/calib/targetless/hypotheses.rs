@@ -384,9 +384,8 @@ pub(super) struct SlideField {
 pub(super) fn slide_scores(
     pose: &Isometry3<f64>,
     free: &Vector3<f64>,
-    reference: &Occupancy,
+    field: &SlideField,
     image: &RangeImage,
-    samples: &[Point3<f64>],
     max_translation: f64,
 ) -> Vec<(f64, f64)> {
     let t = pose.translation.vector;
@@ -398,11 +397,11 @@ pub(super) fn slide_scores(
         })
         .map(|offset| {
             let moved = Translation3::from(free * offset) * pose;
-            let agreement = reference.share(&mapped(samples, &moved));
-            let violations = image.count_violations(samples, &moved) as f64;
+            let agreement = field.occupancy.share(&mapped(&field.samples, &moved));
+            let violations = image.count_violations(&field.samples, &moved) as f64;
             (
                 offset,
-                agreement - VIOLATION_WEIGHT * violations / samples.len().max(1) as f64,
+                agreement - VIOLATION_WEIGHT * violations / field.samples.len().max(1) as f64,
             )
         })
         .collect()
@@ -414,12 +413,11 @@ pub(super) fn slide_scores(
 pub(super) fn slide_peaks(
     pose: &Isometry3<f64>,
     free: &Vector3<f64>,
-    reference: &Occupancy,
+    field: &SlideField,
     image: &RangeImage,
-    samples: &[Point3<f64>],
     max_translation: f64,
 ) -> Vec<Isometry3<f64>> {
-    let scores = slide_scores(pose, free, reference, image, samples, max_translation);
+    let scores = slide_scores(pose, free, field, image, max_translation);
     let mut peaks: Vec<(f64, f64)> = scores
         .iter()
         .enumerate()
@@ -455,10 +453,9 @@ pub(super) fn slides(
     image: &RangeImage,
     max_translation: f64,
 ) -> Vec<Candidate> {
-    let (reference, samples) = (&field.occupancy, &field.samples);
     let best_slide = |c: &Candidate| -> Option<Candidate> {
         let free = c.free?;
-        let (offset, _) = slide_scores(&c.pose, &free, reference, image, samples, max_translation)
+        let (offset, _) = slide_scores(&c.pose, &free, field, image, max_translation)
             .into_iter()
             .reduce(|best, s| if s.1 > best.1 { s } else { best })?;
         Some(Candidate {
@@ -502,14 +499,11 @@ mod tests {
             .collect();
         let occupancy = Occupancy::new(&posts, SLIDE_CELL);
         let image = RangeImage::new(&posts, RangeImage::DEFAULT_RESOLUTION).unwrap();
-        let peaks = slide_peaks(
-            &Isometry3::identity(),
-            &Vector3::x(),
-            &occupancy,
-            &image,
-            &posts,
-            10.0,
-        );
+        let field = SlideField {
+            occupancy,
+            samples: posts,
+        };
+        let peaks = slide_peaks(&Isometry3::identity(), &Vector3::x(), &field, &image, 10.0);
         let mut offsets: Vec<f64> = peaks.iter().map(|p| p.translation.vector.x).collect();
         offsets.sort_by(f64::total_cmp);
         assert_eq!(offsets.len(), 2);

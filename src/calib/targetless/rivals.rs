@@ -259,9 +259,8 @@ pub(super) fn slid_rival(
     let peaks = slide_peaks(
         &best,
         free,
-        &field.occupancy,
+        field,
         verifier.reference_image(),
-        &field.samples,
         contest.max_translation,
     );
     for peak in peaks {
