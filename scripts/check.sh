@@ -56,6 +56,12 @@ step "ruff"
 step "mypy"
 "$VENV/bin/mypy"
 
+step "stubtest (the stubs against the installed wheel)"
+# Compares python/lidarcal/_lidarcal.pyi (and the typed .py modules) with what the built extension
+# really exports: names, signatures, defaults, @final. Run from the repository root, where
+# `import lidarcal` finds the installed wheel (the source tree is under python/).
+"$PY" -m mypy.stubtest lidarcal --allowlist stubtest_allowlist.txt
+
 step "docs (mkdocs build --strict)"
 # Warnings are errors: a broken link or an API reference that does not resolve fails. The API
 # page is read from python/lidarcal (sources and stubs), not from the installed wheel. The site

@@ -1,17 +1,77 @@
-"""Type stubs of the compiled extension module ``lidarcal._lidarcal``."""
+"""Type stubs of the compiled extension module ``lidarcal._lidarcal``.
+
+Checked against the built module by ``python -m mypy.stubtest`` (``scripts/check.sh``). Names
+that exist only here (type aliases, ``TypedDict`` shapes) start with ``_`` so that nobody imports
+them at runtime, and a default the extension cannot show at runtime (PyO3 renders a tuple or
+``Some(..)`` default as ``...``) is written ``...`` here rather than copied from the Rust
+signature, where it lives.
+"""
 
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Literal, TypedDict, overload
+from typing import Any, Literal, TypedDict, final, overload
 
 import numpy as np
 import numpy.typing as npt
 
-ArrayLike = npt.ArrayLike
-F64Array = npt.NDArray[np.float64]
-I64Array = npt.NDArray[np.int64]
-Frame = Literal["target", "reference"]
-LossName = Literal["squared", "linear", "huber", "cauchy"]
+# What src/python/mod.rs registers (PyO3 makes the runtime `__all__`); stubtest checks both agree.
+__all__ = [
+    "AGREEMENT_DISTANCE",
+    "AUTO_TIE",
+    "INTENSITY_NAMES",
+    "MAX_BRIGHT_FRACTION",
+    "MIN_PAIR_OVERLAP",
+    "BeamModel",
+    "CalibrationError",
+    "CalibrationResult",
+    "CheckReport",
+    "FileFormatError",
+    "Line",
+    "Plane",
+    "RefineResult",
+    "Scene",
+    "Shape",
+    "__version__",
+    "calibrate_auto",
+    "calibrate_planes",
+    "calibrate_poles",
+    "calibrate_rig",
+    "calibrate_targetless",
+    "check",
+    "extract_planes",
+    "kabsch",
+    "overlap",
+    "point_to_line_residuals",
+    "point_to_plane_residuals",
+    "ransac_line",
+    "ransac_plane",
+    "read_points",
+    "refine_point_to_line",
+    "refine_point_to_plane",
+    "refine_pose_graph",
+    "rqe",
+    "score_lines",
+    "score_planes",
+    "se3_exp",
+    "se3_log",
+    "sim_corner_scene",
+    "sim_corridor_scene",
+    "sim_paper_scene",
+    "sim_pole_axis_trial",
+    "sim_poles_scene",
+    "sim_scan",
+    "sim_street_scene",
+    "so3_exp",
+    "so3_log",
+    "write_pcd",
+    "write_points",
+]
+
+_ArrayLike = npt.ArrayLike
+_F64Array = npt.NDArray[np.float64]
+_I64Array = npt.NDArray[np.int64]
+_Frame = Literal["target", "reference"]
+_LossName = Literal["squared", "linear", "huber", "cauchy"]
 
 __version__: str
 #: Names an intensity field may have in a file, compared without case; the first is canonical.
@@ -25,9 +85,9 @@ class CalibrationError(RuntimeError):
     instance made by hand).
     """
 
-    kind: FailureKind
+    kind: _FailureKind
 
-FailureKind = Literal[
+_FailureKind = Literal[
     "ambiguous",
     "unobservable",
     "too_few_features",
@@ -37,6 +97,7 @@ FailureKind = Literal[
     "inconsistent_methods",
 ]
 
+@final
 class CheckReport:
     """What ``check`` found: a verdict, its one-line reason and the evidence."""
 
@@ -65,17 +126,17 @@ class CheckReport:
     @property
     def overlap_points(self) -> int: ...
     @property
-    def aligned(self) -> F64Array: ...
+    def aligned(self) -> _F64Array: ...
     @property
     def correction_rotation_deg(self) -> float: ...
     @property
     def correction_translation_m(self) -> float: ...
     @property
-    def weakest_translation(self) -> F64Array: ...
+    def weakest_translation(self) -> _F64Array: ...
     @property
     def weakest_translation_share(self) -> float: ...
     @property
-    def weakest_rotation(self) -> F64Array: ...
+    def weakest_rotation(self) -> _F64Array: ...
     @property
     def weakest_rotation_share(self) -> float: ...
     @property
@@ -100,36 +161,37 @@ def check(
 class FileFormatError(ValueError):
     """A file is not a valid point cloud of its format; the message names the file and why."""
 
-class ReadInfo(TypedDict):
+class _ReadInfo(TypedDict):
     path: str
     fields: list[str]
     available: list[str]
     points: int
     dropped_non_finite: int
 
-FieldsArg = Literal["all"] | Sequence[str] | None
+_FieldsArg = Literal["all"] | Sequence[str] | None
 
 @overload
 def read_points(
-    path: str | PathLike[str], fields: FieldsArg = None, *, with_info: Literal[False] = False
-) -> F64Array: ...
+    path: str | PathLike[str], fields: _FieldsArg = None, *, with_info: Literal[False] = False
+) -> _F64Array: ...
 @overload
 def read_points(
-    path: str | PathLike[str], fields: FieldsArg = None, *, with_info: Literal[True]
-) -> tuple[F64Array, ReadInfo]: ...
+    path: str | PathLike[str], fields: _FieldsArg = None, *, with_info: Literal[True]
+) -> tuple[_F64Array, _ReadInfo]: ...
 def write_points(
     path: str | PathLike[str],
-    points: ArrayLike,
+    points: _ArrayLike,
     fields: Sequence[str] | None = None,
     *,
     pcd_format: Literal["binary", "binary_compressed", "ascii"] = "binary",
 ) -> None: ...
 
+@final
 class RefineResult:
     """The result of a refinement: the transform and the solver's report."""
 
     @property
-    def transform(self) -> F64Array:
+    def transform(self) -> _F64Array:
         """(4, 4) ``reference_from_target``."""
     @property
     def initial_cost(self) -> float: ...
@@ -146,10 +208,11 @@ class RefineResult:
     @property
     def residual_count(self) -> int: ...
     @property
-    def hessian(self) -> F64Array: ...
+    def hessian(self) -> _F64Array: ...
     @property
-    def covariance(self) -> F64Array | None: ...
+    def covariance(self) -> _F64Array | None: ...
 
+@final
 class CalibrationResult:
     """The result of a calibration: ``transform`` maps target points into the reference frame.
 
@@ -165,10 +228,10 @@ class CalibrationResult:
     @property
     def check(self) -> CheckReport: ...
     @property
-    def transform(self) -> F64Array:
+    def transform(self) -> _F64Array:
         """(4, 4) ``reference_from_target``."""
     @property
-    def initial_transform(self) -> F64Array: ...
+    def initial_transform(self) -> _F64Array: ...
     @property
     def converged(self) -> bool: ...
     @property
@@ -178,45 +241,45 @@ class CalibrationResult:
     @property
     def termination(self) -> str: ...
     @property
-    def rmse(self) -> F64Array:
+    def rmse(self) -> _F64Array:
         """(3,) per plane or (K,) per pole, metres."""
     @property
-    def inlier_counts(self) -> I64Array: ...
+    def inlier_counts(self) -> _I64Array: ...
     @property
-    def inliers_reference(self) -> list[I64Array]: ...
+    def inliers_reference(self) -> list[_I64Array]: ...
     @property
-    def inliers_target(self) -> list[I64Array]: ...
+    def inliers_target(self) -> list[_I64Array]: ...
     @property
-    def covariance(self) -> F64Array | None: ...
+    def covariance(self) -> _F64Array | None: ...
     @property
     def timings(self) -> dict[str, float]: ...
     # Planes only (None for poles).
     @property
-    def planes_reference(self) -> F64Array | None: ...
+    def planes_reference(self) -> _F64Array | None: ...
     @property
-    def planes_target(self) -> F64Array | None: ...
+    def planes_target(self) -> _F64Array | None: ...
     @property
-    def ordering_scores(self) -> F64Array | None: ...
+    def ordering_scores(self) -> _F64Array | None: ...
     @property
     def ordering_margin(self) -> float | None: ...
     @property
     def used_up(self) -> bool | None: ...
     @property
-    def corners(self) -> F64Array | None: ...
+    def corners(self) -> _F64Array | None: ...
     @property
-    def distance_thresholds(self) -> F64Array | None: ...
+    def distance_thresholds(self) -> _F64Array | None: ...
     # Poles only (None for planes).
     @property
-    def poles_reference(self) -> F64Array | None:
+    def poles_reference(self) -> _F64Array | None:
         """(K, 6) matched axes [point, direction] in the reference frame."""
     @property
-    def poles_target(self) -> F64Array | None: ...
+    def poles_target(self) -> _F64Array | None: ...
     @property
-    def pole_radii(self) -> F64Array | None: ...
+    def pole_radii(self) -> _F64Array | None: ...
     @property
-    def intensity_thresholds(self) -> F64Array | None: ...
+    def intensity_thresholds(self) -> _F64Array | None: ...
     @property
-    def hypothesis_scores(self) -> F64Array | None:
+    def hypothesis_scores(self) -> _F64Array | None:
         """(H,) score of every correspondence/sign hypothesis, lower is better."""
     @property
     def hypotheses(self) -> list[dict[str, Any]] | None: ...
@@ -247,14 +310,14 @@ class CalibrationResult:
     @property
     def triplet(self) -> bool | None: ...
     @property
-    def weakest_translation(self) -> tuple[F64Array, float] | None:
+    def weakest_translation(self) -> tuple[_F64Array, float] | None:
         """(direction in the reference frame, share of the translation information)."""
     @property
     def icp_fitness(self) -> float | None: ...
 
 def calibrate_targetless(
-    reference: ArrayLike,
-    target: ArrayLike,
+    reference: _ArrayLike,
+    target: _ArrayLike,
     *,
     distance_threshold: float | None = None,
     voxel_size: float = 0.1,
@@ -268,7 +331,7 @@ def calibrate_targetless(
     seed: int = 0,
 ) -> CalibrationResult: ...
 def overlap(
-    reference: ArrayLike, target: ArrayLike, transform: ArrayLike, distance: float = 0.25
+    reference: _ArrayLike, target: _ArrayLike, transform: _ArrayLike, distance: float = 0.25
 ) -> float: ...
 
 AGREEMENT_DISTANCE: float
@@ -277,68 +340,68 @@ MIN_PAIR_OVERLAP: float
 MAX_BRIGHT_FRACTION: float
 
 def calibrate_auto(
-    reference: ArrayLike,
-    target: ArrayLike,
+    reference: _ArrayLike,
+    target: _ArrayLike,
     *,
     seed: int = 0,
-    up: ArrayLike | None = None,
+    up: _ArrayLike | None = None,
     distance_threshold: float | None = None,
     intensity_threshold: float | None = None,
     vendor: str | None = None,
     max_bright_fraction: float | None = None,
 ) -> CalibrationResult: ...
 
-PoseGraphTermination = Literal[
+_PoseGraphTermination = Literal[
     "step_tolerance", "no_further_decrease", "nothing_to_refine", "max_iterations"
 ]
 
-class PoseGraphReportDict(TypedDict):
+class _PoseGraphReportDict(TypedDict):
     """How the pose-graph refinement of ``calibrate_rig`` went."""
 
     converged: bool
-    termination: PoseGraphTermination
+    termination: _PoseGraphTermination
     iterations: int
     initial_cost: float
     final_cost: float
 
-class RigDict(TypedDict):
+class _RigDict(TypedDict):
     """What ``calibrate_rig`` returns (``lidarcal.calibrate_rig`` builds its result from it)."""
 
-    transforms: dict[str, F64Array]
-    direct: dict[str, F64Array]
+    transforms: dict[str, _F64Array]
+    direct: dict[str, _F64Array]
     #: (a, b, method, a_from_b, rotation_residual_deg, translation_residual_m, result)
-    edges: list[tuple[str, str, str, F64Array, float, float, CalibrationResult]]
+    edges: list[tuple[str, str, str, _F64Array, float, float, CalibrationResult]]
     failures: dict[tuple[str, str], str]
-    failure_kinds: dict[tuple[str, str], FailureKind | None]
+    failure_kinds: dict[tuple[str, str], _FailureKind | None]
     unconnected: list[str]
-    pose_graph: PoseGraphReportDict
+    pose_graph: _PoseGraphReportDict
 
 def calibrate_rig(
-    reference: ArrayLike,
-    targets: list[tuple[str, ArrayLike]],
+    reference: _ArrayLike,
+    targets: list[tuple[str, _ArrayLike]],
     *,
     method: str = "auto",
     pairwise: bool = True,
     require_all: bool = True,
     seed: int = 0,
-    up: ArrayLike | None = None,
+    up: _ArrayLike | None = None,
     distance_threshold: float | None = None,
     intensity_threshold: float | None = None,
     vendor: str | None = None,
     max_bright_fraction: float | None = None,
-) -> RigDict: ...
+) -> _RigDict: ...
 def refine_pose_graph(
-    poses: list[F64Array],
-    edges: list[tuple[int, int, F64Array, F64Array]],
+    poses: list[_F64Array],
+    edges: list[tuple[int, int, _F64Array, _F64Array]],
     iterations: int = 20,
-) -> list[F64Array]: ...
+) -> list[_F64Array]: ...
 def calibrate_planes(
-    reference: ArrayLike,
-    target: ArrayLike,
+    reference: _ArrayLike,
+    target: _ArrayLike,
     *,
     distance_threshold: float | None = None,
     seed: int = 0,
-    up: ArrayLike | None = None,
+    up: _ArrayLike | None = None,
     refine: bool = True,
     loss: Literal["auto", "squared", "linear", "huber", "cauchy"] = "auto",
     loss_scale: float | None = None,
@@ -347,8 +410,8 @@ def calibrate_planes(
     time_budget_s: float | None = None,
 ) -> CalibrationResult: ...
 def calibrate_poles(
-    reference: ArrayLike,
-    target: ArrayLike,
+    reference: _ArrayLike,
+    target: _ArrayLike,
     *,
     intensity_threshold: float | None = None,
     vendor: Literal["velodyne", "hesai", "leishen", "robosense"] | None = None,
@@ -361,43 +424,45 @@ def calibrate_poles(
     time_budget_s: float | None = None,
     max_bright_fraction: float = 0.25,
 ) -> CalibrationResult: ...
-def rqe(points: ArrayLike, sigma: float) -> float: ...
+def rqe(points: _ArrayLike, sigma: float) -> float: ...
 
+@final
 class Plane:
     """A plane ``normal . p + offset = 0`` found in a point cloud, with its inliers."""
 
     @property
-    def normal(self) -> F64Array:
+    def normal(self) -> _F64Array:
         """(3,) unit normal, pointing toward the sensor."""
     @property
     def offset(self) -> float: ...
     @property
-    def coefficients(self) -> F64Array:
+    def coefficients(self) -> _F64Array:
         """(4,) ``[nx, ny, nz, d]``."""
     @property
-    def inliers(self) -> I64Array:
+    def inliers(self) -> _I64Array:
         """int64 indices of the inlier points, ascending."""
     @property
     def rms(self) -> float: ...
     @property
     def hypotheses(self) -> int: ...
 
+@final
 class Line:
     """A 3D line through ``point`` along the unit ``direction``, with its inliers."""
 
     @property
-    def point(self) -> F64Array: ...
+    def point(self) -> _F64Array: ...
     @property
-    def direction(self) -> F64Array: ...
+    def direction(self) -> _F64Array: ...
     @property
-    def inliers(self) -> I64Array: ...
+    def inliers(self) -> _I64Array: ...
     @property
     def rms(self) -> float: ...
     @property
     def hypotheses(self) -> int: ...
 
 def ransac_plane(
-    points: ArrayLike,
+    points: _ArrayLike,
     distance_threshold: float,
     *,
     confidence: float = 0.999,
@@ -405,7 +470,7 @@ def ransac_plane(
     seed: int = 0,
 ) -> Plane: ...
 def ransac_line(
-    points: ArrayLike,
+    points: _ArrayLike,
     distance_threshold: float,
     *,
     confidence: float = 0.999,
@@ -413,7 +478,7 @@ def ransac_line(
     seed: int = 0,
 ) -> Line: ...
 def extract_planes(
-    points: ArrayLike,
+    points: _ArrayLike,
     count: int = 3,
     distance_threshold: float = 0.05,
     *,
@@ -425,54 +490,55 @@ def extract_planes(
     seed: int = 0,
 ) -> list[Plane]: ...
 def score_planes(
-    points: ArrayLike, planes: ArrayLike, distance_threshold: float
-) -> tuple[F64Array, I64Array]: ...
+    points: _ArrayLike, planes: _ArrayLike, distance_threshold: float
+) -> tuple[_F64Array, _I64Array]: ...
 def score_lines(
-    points: ArrayLike, lines: ArrayLike, distance_threshold: float
-) -> tuple[F64Array, I64Array]: ...
-def kabsch(a: ArrayLike, b: ArrayLike, weights: ArrayLike | None = None) -> F64Array:
+    points: _ArrayLike, lines: _ArrayLike, distance_threshold: float
+) -> tuple[_F64Array, _I64Array]: ...
+def kabsch(a: _ArrayLike, b: _ArrayLike, weights: _ArrayLike | None = None) -> _F64Array:
     """The rotation ``R`` minimising ``sum w_i |R b_i - a_i|^2``."""
 
-def so3_exp(phi: ArrayLike) -> F64Array: ...
-def so3_log(rotation: ArrayLike) -> F64Array: ...
-def se3_exp(xi: ArrayLike) -> F64Array: ...
-def se3_log(transform: ArrayLike) -> F64Array: ...
+def so3_exp(phi: _ArrayLike) -> _F64Array: ...
+def so3_log(rotation: _ArrayLike) -> _F64Array: ...
+def se3_exp(xi: _ArrayLike) -> _F64Array: ...
+def se3_log(transform: _ArrayLike) -> _F64Array: ...
 def refine_point_to_plane(
-    planes: ArrayLike,
-    points: Sequence[ArrayLike],
-    initial_transform: ArrayLike | None = None,
+    planes: _ArrayLike,
+    points: Sequence[_ArrayLike],
+    initial_transform: _ArrayLike | None = None,
     *,
-    frames: Sequence[Frame] | None = None,
-    loss: LossName = "squared",
+    frames: Sequence[_Frame] | None = None,
+    loss: _LossName = "squared",
     loss_scale: float = 0.1,
     max_iterations: int = 100,
 ) -> RefineResult: ...
 def refine_point_to_line(
-    lines: ArrayLike,
-    points: Sequence[ArrayLike],
-    initial_transform: ArrayLike | None = None,
+    lines: _ArrayLike,
+    points: Sequence[_ArrayLike],
+    initial_transform: _ArrayLike | None = None,
     *,
-    frames: Sequence[Frame] | None = None,
-    loss: LossName = "squared",
+    frames: Sequence[_Frame] | None = None,
+    loss: _LossName = "squared",
     loss_scale: float = 0.1,
     max_iterations: int = 100,
 ) -> RefineResult: ...
 def point_to_plane_residuals(
-    points: ArrayLike, plane: ArrayLike, transform: ArrayLike, frame: Frame = "target"
-) -> tuple[F64Array, F64Array]: ...
+    points: _ArrayLike, plane: _ArrayLike, transform: _ArrayLike, frame: _Frame = "target"
+) -> tuple[_F64Array, _F64Array]: ...
 def point_to_line_residuals(
-    points: ArrayLike, line: ArrayLike, transform: ArrayLike, frame: Frame = "target"
-) -> tuple[F64Array, F64Array]: ...
+    points: _ArrayLike, line: _ArrayLike, transform: _ArrayLike, frame: _Frame = "target"
+) -> tuple[_F64Array, _F64Array]: ...
 
 # --- scan simulator (wrapped by lidarcal.sim) ---
 
+@final
 class BeamModel:
     """A multi-beam LiDAR model: a preset by name or ``BeamModel.custom(...)``."""
 
-    def __init__(self, name: str) -> None: ...
+    def __new__(cls, name: str) -> BeamModel: ...
     @staticmethod
     def custom(
-        elevations_deg: ArrayLike,
+        elevations_deg: _ArrayLike,
         *,
         columns: int = 1800,
         min_range: float = 0.5,
@@ -487,7 +553,7 @@ class BeamModel:
     @property
     def columns(self) -> int: ...
     @property
-    def elevations_deg(self) -> F64Array: ...
+    def elevations_deg(self) -> _F64Array: ...
     @property
     def min_range(self) -> float: ...
     @property
@@ -495,47 +561,49 @@ class BeamModel:
     @property
     def range_noise(self) -> float: ...
 
+@final
 class Shape:
     """A shape in the world frame."""
 
     @staticmethod
     def rectangle(
-        corner: ArrayLike,
-        edge_u: ArrayLike,
-        edge_v: ArrayLike,
+        corner: _ArrayLike,
+        edge_u: _ArrayLike,
+        edge_v: _ArrayLike,
         *,
-        intensity: tuple[float, float] = (20.0, 70.0),
+        intensity: tuple[float, float] = ...,
     ) -> Shape: ...
     @staticmethod
     def cuboid(
-        size: ArrayLike,
-        pose: ArrayLike | None = None,
+        size: _ArrayLike,
+        pose: _ArrayLike | None = None,
         *,
-        intensity: tuple[float, float] = (10.0, 90.0),
+        intensity: tuple[float, float] = ...,
     ) -> Shape: ...
     @staticmethod
     def cylinder(
-        base: ArrayLike,
-        direction: ArrayLike,
+        base: _ArrayLike,
+        direction: _ArrayLike,
         length: float,
         radius: float,
         *,
-        intensity: tuple[float, float] = (30.0, 80.0),
+        intensity: tuple[float, float] = ...,
         band: tuple[float, float] | None = None,
-        band_intensity: tuple[float, float] = (235.0, 255.0),
+        band_intensity: tuple[float, float] = ...,
     ) -> Shape: ...
     @property
     def kind(self) -> str: ...
 
+@final
 class Scene:
     """Two sensors' points in their own frames and the ground truth."""
 
     @property
     def kind(self) -> str: ...
     @property
-    def reference(self) -> F64Array: ...
+    def reference(self) -> _F64Array: ...
     @property
-    def target(self) -> F64Array: ...
+    def target(self) -> _F64Array: ...
     @property
     def reference_rings(self) -> npt.NDArray[np.int64]: ...
     @property
@@ -545,26 +613,26 @@ class Scene:
     @property
     def target_labels(self) -> npt.NDArray[np.int64]: ...
     @property
-    def reference_from_target(self) -> F64Array: ...
+    def reference_from_target(self) -> _F64Array: ...
     @property
-    def world_from_reference(self) -> F64Array: ...
+    def world_from_reference(self) -> _F64Array: ...
     @property
-    def planes(self) -> F64Array: ...
+    def planes(self) -> _F64Array: ...
     @property
-    def pole_axes(self) -> F64Array: ...
+    def pole_axes(self) -> _F64Array: ...
     @property
-    def pole_radii(self) -> F64Array: ...
+    def pole_radii(self) -> _F64Array: ...
 
 def sim_scan(
     shapes: Sequence[Shape],
     model: str | BeamModel | None = None,
-    sensor_pose: ArrayLike | None = None,
+    sensor_pose: _ArrayLike | None = None,
     *,
     seed: int = 0,
     noise: float | None = None,
     dropout: float = 0.0,
     with_ring: bool = False,
-) -> F64Array: ...
+) -> _F64Array: ...
 def sim_corner_scene(
     model: str | BeamModel | None = None,
     *,
@@ -601,9 +669,9 @@ def sim_street_scene(
 ) -> Scene: ...
 def sim_corridor_scene(*, seed: int = 0) -> Scene: ...
 def sim_paper_scene(
-    *, alpha_deg: float = 90.0, configuration: int | None = 1, seed: int = 0
+    *, alpha_deg: float = 90.0, configuration: int | None = ..., seed: int = 0
 ) -> Scene: ...
 def sim_pole_axis_trial(
     distance: float, radius: float, seed: int
 ) -> tuple[int, float, float, float, float]: ...
-def write_pcd(path: str | PathLike[str], points: ArrayLike, *, ascii: bool = False) -> None: ...
+def write_pcd(path: str | PathLike[str], points: _ArrayLike, *, ascii: bool = False) -> None: ...
