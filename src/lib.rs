@@ -7,7 +7,8 @@
 //! The calibration methods, in [`calib`]:
 //!
 //! * [`calib::planes`]: three planar surfaces of a wall corner (Jiao et al., 2019), any mounting.
-//! * [`calib::poles`]: two or more poles wrapped in retro-reflective tape (cylinder axes).
+//! * [`calib::poles`]: two or more poles wrapped in retro-reflective tape (Xue et al., 2019;
+//!   cylinder axes).
 //! * [`calib::targetless`]: the planes of an ordinary scene (a street), matched without an
 //!   initial guess, verified by free-space consistency and refined by point-to-plane ICP.
 //! * [`calib::method`]: one entry point, [`calib::calibrate`] ([`calib::Method::Auto`] keeps the

@@ -2,7 +2,7 @@
 //!
 //! * [`planes`]: three planar surfaces of a wall corner seen by both sensors (Jiao et al., 2019),
 //!   without an initial guess and for any mounting orientation.
-//! * [`poles`]: two or more non-parallel poles wrapped in retro-reflective tape (seed 003), with
+//! * [`poles`]: two or more non-parallel poles wrapped in retro-reflective tape (Xue et al., 2019), with
 //!   the cylinder axis instead of the centroid line and a scored choice among the 8 hypotheses.
 //! * [`targetless`]: the planes of an ordinary scene (a street), matched by plane pairs and
 //!   triplets without an initial guess, verified and refined by point-to-plane ICP; refuses

@@ -7,7 +7,7 @@
 //!   sampled, not ray-cast; intensity 0, ring 0.
 //! * [`corner_scene`]: a building corner (two 20 m x 6 m walls and the ground) scanned by two
 //!   spinning LiDARs, with optional clutter boxes and extra walls.
-//! * [`poles_scene`]: two non-parallel poles wrapped in retro-reflective tape (seed 003, Sec. IV-A:
+//! * [`poles_scene`]: two non-parallel poles wrapped in retro-reflective tape (Xue et al., 2019, Sec. IV-A:
 //!   axis z-component > 0.9, 1.5–4 m apart, 0.006 m range noise), a ground plane and optionally a
 //!   bright road sign as a distractor.
 //! * [`street_scene`]: a street with facades, kerbs, parked cars, trees and poles, scanned by a
@@ -105,7 +105,7 @@ pub enum PaperConfiguration {
     /// Table II configuration 2: rotation (-0.5174, 0.1277, 0.1222) rad, translation
     /// (1.3785, -1.3929, 1.3020) m.
     Two,
-    /// Drawn from the seed as the paper describes: roll and pitch within +-20 deg, yaw in
+    /// Drawn from `seed` as Jiao et al. (2019) describe: roll and pitch within +-20 deg, yaw in
     /// [0, 360) deg, each translation component within +-1.5 m.
     Random,
 }
@@ -514,11 +514,11 @@ pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene>
 // ---------------------------------------------------------------------------------------------
 // Two taped poles.
 
-/// Range noise of the pole scene, metres (seed 003, Sec. IV-A).
+/// Range noise of the pole scene, metres (Xue et al., 2019, Sec. IV-A).
 pub const POLES_RANGE_NOISE: f64 = 0.006;
-/// Smallest z-component of a pole's axis (seed 003).
+/// Smallest z-component of a pole's axis (Xue et al., 2019).
 pub const POLE_MIN_AXIS_Z: f64 = 0.9;
-/// Smallest and largest distance between the poles' base centres, metres (seed 003).
+/// Smallest and largest distance between the poles' base centres, metres (Xue et al., 2019).
 pub const POLE_SPACING_RANGE: (f64, f64) = (1.5, 4.0);
 /// Smallest angle between the two pole axes, degrees: nearly parallel poles do not determine the
 /// rotation about them, so they are redrawn.

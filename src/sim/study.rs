@@ -1,4 +1,5 @@
-//! The pole-axis study (after Table II of the pole-calibration text, seed 003): how far from a
+//! The pole-axis study (after Table II of Xue et al., "Automatic Calibration of Dual-LiDARs
+//! Using Two Poles Stickered with Retro-Reflective Tape", 2019): how far from a
 //! pole's true axis is (a) the line fitted through its points and (b) the axis of a fitted
 //! cylinder, for a VLP-16 at a given distance from a pole of a given radius.
 //!
@@ -24,7 +25,7 @@ use crate::fit::cylinder::fit_cylinder;
 use crate::fit::fit_line;
 use crate::geometry::Line;
 
-/// Range noise of the study, metres (seed 003).
+/// Range noise of the study, metres (Xue et al., 2019).
 pub const STUDY_RANGE_NOISE: f64 = 0.006;
 /// Length of the studied pole, metres.
 pub const STUDY_POLE_LENGTH: f64 = 3.0;
