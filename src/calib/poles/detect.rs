@@ -4,6 +4,7 @@
 use nalgebra::Point3;
 
 use super::fit::*;
+use super::ground::*;
 use super::hypotheses::*;
 use super::options::*;
 use super::threshold::*;
@@ -11,7 +12,7 @@ use crate::budget::Deadline;
 use crate::cluster::euclidean_clusters_until;
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
-use crate::geometry::Line;
+use crate::geometry::{Line, Plane};
 use crate::ransac::line::ransac_line;
 use crate::ransac::RansacOptions;
 
@@ -159,6 +160,29 @@ pub(super) fn extract_poles_until(
         poles,
         rejected,
     })
+}
+
+/// Steps 1-4 on one cloud of [`calibrate_poles`](super::calibrate_poles): its poles (at least a
+/// non-parallel pair, else the calibration is refused) and its largest plane among the returns
+/// below the intensity threshold. `which` names the cloud in errors.
+pub(super) fn detect_cloud(
+    points: &[Point3<f64>],
+    intensities: &[f64],
+    which: &str,
+    options: &PoleOptions,
+    deadline: &Deadline,
+) -> Result<(PoleExtraction, Option<Plane>)> {
+    let extraction = extract_poles_until(points, intensities, options, deadline)
+        .map_err(|e| with_cloud(e, which))?;
+    // The tape is left out: the front faces of two poles can pass for a plane.
+    let dull: Vec<Point3<f64>> = points
+        .iter()
+        .zip(intensities)
+        .filter(|(_, &i)| i < extraction.intensity_threshold)
+        .map(|(p, _)| *p)
+        .collect();
+    let plane = largest_plane(&dull, points.len(), options.seed);
+    check_poles(&extraction, which).map(|_| (extraction, plane))
 }
 
 /// Sequential RANSAC lines in a cluster that failed the pole test as a whole (poles crossing or

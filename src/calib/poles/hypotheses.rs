@@ -4,7 +4,7 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::detect::*;
-use crate::error::{Error, Result};
+use crate::error::{Error, FailureKind, Result};
 use crate::geometry::Line;
 use crate::kabsch::kabsch;
 use crate::lm::Loss;
@@ -192,6 +192,38 @@ pub(super) fn per_pole_rms(
         start += n;
     }
     Ok(out)
+}
+
+/// The base matches of the hypotheses: the first non-parallel pair of reference poles (largest
+/// first) against every ordered non-parallel pair of target poles, with the four sign
+/// combinations each, at most [`MAX_HYPOTHESES`].
+pub(super) fn base_matches(
+    poles_ref: &[DetectedPole],
+    poles_tgt: &[DetectedPole],
+) -> Result<Vec<[(usize, usize, i8); 2]>> {
+    // The base pair of reference poles: the first non-parallel pair, largest poles first.
+    let base = base_pair(poles_ref).ok_or_else(|| {
+        Error::calibration(
+            FailureKind::Unobservable,
+            "reference cloud: the poles are parallel",
+        )
+    })?;
+    let mut bases = Vec::new();
+    for k0 in 0..poles_tgt.len() {
+        for k1 in 0..poles_tgt.len() {
+            if k0 == k1
+                || angle_between_lines(&poles_tgt[k0].axis, &poles_tgt[k1].axis) < MIN_POLE_ANGLE
+            {
+                continue;
+            }
+            for (s0, s1) in [(1, 1), (1, -1), (-1, 1), (-1, -1)] {
+                if bases.len() < MAX_HYPOTHESES {
+                    bases.push([(base.0, k0, s0), (base.1, k1, s1)]);
+                }
+            }
+        }
+    }
+    Ok(bases)
 }
 
 pub(super) fn base_pair(poles: &[DetectedPole]) -> Option<(usize, usize)> {

@@ -27,8 +27,8 @@
 //!    [`MAX_CYLINDER_RMS`] and a diameter below the pole's length.
 //! 4. **Axis.** A RANSAC line ([`crate::ransac::line::ransac_line`], threshold `1.2 r + 3 cm`, or
 //!    `3 sqrt(l2) + 3 cm` when the radius is unknown) drops stray points, then
-//!    [`fit_cylinder`](crate::fit::cylinder::fit_cylinder) finds the axis by Levenberg–Marquardt on `dist(x, axis) - r` from the sensor's
-//!    side (radius given or estimated). [`AxisFit::Line`] keeps the centroid line instead, for
+//!    [`fit_cylinder`](crate::fit::cylinder::fit_cylinder) finds the axis by Levenberg–Marquardt
+//!    on `dist(x, axis) - r` from the sensor's side (radius given or estimated). [`AxisFit::Line`] keeps the centroid line instead, for
 //!    comparison only.
 //! 5. **Hypotheses.** Two non-parallel pole axes fix the transform, but not which target pole is
 //!    which, nor the direction signs: 2 correspondences x 4 signs = 8 hypotheses for two poles
@@ -40,7 +40,8 @@
 //!    directions. For the cylinder residual `|dist| - r`, each point is moved toward its own
 //!    sensor's fitted axis by the radius once, in its own frame (independent of the unknown
 //!    transform); its distance to the other sensor's axis is then `|dist| - r` at the solution, and
-//!    the problem is the point-to-line problem of [`PointToLine`](crate::residuals::PointToLine) with its tested analytic Jacobians.
+//!    the problem is the point-to-line problem of [`PointToLine`](crate::residuals::PointToLine)
+//!    with its tested analytic Jacobians.
 //! 6. **Choice.** The axes alone are symmetric: flipping both signs maps to the rotation by 180 deg
 //!    about the common perpendicular, and swapping the poles to a 180 deg rotation about a bisector
 //!    of the axes; four of the eight hypotheses fit the axes exactly. Each hypothesis gets a score
@@ -124,12 +125,10 @@ use nalgebra::{Isometry3, Matrix6, Point3};
 
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
-use crate::check::{CheckReport, PreparedPair};
-use crate::cluster::Grid;
-use crate::error::{Error, FailureKind, Result};
-use crate::geometry::pose_error;
+use crate::check::CheckReport;
+use crate::error::Result;
 use crate::geometry::Line;
-use crate::lm::{solve, LmReport};
+use crate::lm::LmReport;
 
 /// Result of [`calibrate_poles`].
 #[derive(Debug, Clone, PartialEq)]
@@ -176,9 +175,10 @@ pub struct PoleCalibration {
 /// Calibrates `reference_from_target` from taped poles seen by both sensors (see the module
 /// docs). `*_intensities` hold one intensity per point.
 ///
-/// Errors: [`Error::InvalidInput`] for malformed input (lengths, NaN coordinates or intensities,
-/// options); [`Error::Calibration`] when a cloud has no bright points, fewer than two poles, only
-/// parallel poles, or when the best two hypotheses are indistinguishable.
+/// Errors: [`Error::InvalidInput`](crate::Error::InvalidInput) for malformed input (lengths, NaN
+/// coordinates or intensities, options); [`Error::Calibration`](crate::Error::Calibration) when a
+/// cloud has no bright points, fewer than two poles, only parallel poles, or when the best two
+/// hypotheses are indistinguishable.
 pub fn calibrate_poles(
     reference: &[Point3<f64>],
     reference_intensities: &[f64],
@@ -192,256 +192,61 @@ pub fn calibrate_poles(
     let deadline = Deadline::new(options.time_budget);
     let mut clock = Stopwatch::start();
 
-    let per_cloud = |points: &[Point3<f64>], intensities: &[f64], which: &str| {
-        let extraction = extract_poles_until(points, intensities, options, &deadline)
-            .map_err(|e| with_cloud(e, which))?;
-        // The tape is left out: the front faces of two poles can pass for a plane.
-        let dull: Vec<Point3<f64>> = points
-            .iter()
-            .zip(intensities)
-            .filter(|(_, &i)| i < extraction.intensity_threshold)
-            .map(|(p, _)| *p)
-            .collect();
-        let plane = largest_plane(&dull, points.len(), options.seed);
-        check_poles(&extraction, which).map(|_| (extraction, plane))
-    };
+    // Steps 1-4 on each cloud: its poles and its largest plane.
     let (ref_result, tgt_result) = crate::join(
-        || per_cloud(reference, reference_intensities, "reference"),
-        || per_cloud(target, target_intensities, "target"),
+        || {
+            detect_cloud(
+                reference,
+                reference_intensities,
+                "reference",
+                options,
+                &deadline,
+            )
+        },
+        || detect_cloud(target, target_intensities, "target", options, &deadline),
     );
     let (ext_ref, ground_ref) = ref_result?;
     let (ext_tgt, ground_tgt) = tgt_result?;
     clock.lap("poles");
     deadline.check("pole extraction")?;
 
+    // Step 5: every correspondence and sign of a base pair, solved, refined and scored.
     let clouds = Clouds {
         reference,
         target,
         poles_ref: &ext_ref.poles,
         poles_tgt: &ext_tgt.poles,
     };
-    // The base pair of reference poles: the first non-parallel pair, largest poles first.
-    let base = base_pair(&ext_ref.poles).ok_or_else(|| {
-        Error::calibration(
-            FailureKind::Unobservable,
-            "reference cloud: the poles are parallel",
-        )
-    })?;
-    let mut bases = Vec::new();
-    for k0 in 0..ext_tgt.poles.len() {
-        for k1 in 0..ext_tgt.poles.len() {
-            if k0 == k1
-                || angle_between_lines(&ext_tgt.poles[k0].axis, &ext_tgt.poles[k1].axis)
-                    < MIN_POLE_ANGLE
-            {
-                continue;
-            }
-            for (s0, s1) in [(1, 1), (1, -1), (-1, 1), (-1, -1)] {
-                if bases.len() < MAX_HYPOTHESES {
-                    bases.push([(base.0, k0, s0), (base.1, k1, s1)]);
-                }
-            }
-        }
-    }
-
-    let stride = target.len().div_ceil(OVERLAP_SAMPLE).max(1);
-    let sample: Vec<Point3<f64>> = target.iter().step_by(stride).copied().collect();
-    let grid = Grid::new(reference, options.overlap_distance)?;
-    let evaluate =
-        |b: &[(usize, usize, i8); 2]| -> Result<(Hypothesis, Isometry3<f64>, Option<LmReport>)> {
-            deadline.check("the pole hypotheses")?;
-            let pairs: Vec<(Line, Line)> = b
-                .iter()
-                .map(|&(i, k, s)| (ext_ref.poles[i].axis, signed_axis(&ext_tgt.poles[k], s)))
-                .collect();
-            let start = closed_form(&pairs)?;
-            let matches = extend_matches(b, &start, &clouds);
-            let start = if matches.len() > 2 {
-                let pairs: Vec<(Line, Line)> = matches
-                    .iter()
-                    .map(|&(i, k, s)| (ext_ref.poles[i].axis, signed_axis(&ext_tgt.poles[k], s)))
-                    .collect();
-                closed_form(&pairs)?
-            } else {
-                start
-            };
-            let problem = point_to_axis_problem(&clouds, &matches, options.loss)?;
-            let solution = solve(&problem, &start, &options.lm)?;
-            let pose = solution.pose;
-            let rms = axis_rms(&problem, &pose);
-            let (ground_angle, ground_offset) = match (ground_ref, ground_tgt) {
-                (Some(gr), Some(gt)) => {
-                    let mapped = gt.transformed(&pose);
-                    let angle = mapped.normal.dot(&gr.normal).clamp(-1.0, 1.0).acos();
-                    (Some(angle), Some((mapped.offset - gr.offset).abs()))
-                }
-                _ => (None, None),
-            };
-            let near = sample
-                .iter()
-                .filter(|p| grid.any_within(&(pose * *p), options.overlap_distance))
-                .count();
-            let overlap = near as f64 / sample.len().max(1) as f64;
-            let score = rms / AXIS_RMS_SCALE
-                + ground_angle.map_or(0.0, |a| a / GROUND_ANGLE_SCALE)
-                + ground_offset.map_or(0.0, |d| d / GROUND_OFFSET_SCALE)
-                + (1.0 - overlap) / OVERLAP_SCALE;
-            Ok((
-                Hypothesis {
-                    matches,
-                    reference_from_target: pose,
-                    axis_rms: rms,
-                    ground_angle,
-                    ground_offset,
-                    overlap,
-                    score,
-                },
-                start,
-                Some(solution.report),
-            ))
-        };
-    #[cfg(feature = "parallel")]
-    let evaluated: Vec<_> = {
-        use rayon::prelude::*;
-        bases.par_iter().map(evaluate).collect()
-    };
-    #[cfg(not(feature = "parallel"))]
-    let evaluated: Vec<_> = bases.iter().map(evaluate).collect();
-    let mut hypotheses = Vec::with_capacity(evaluated.len());
-    let mut starts = Vec::with_capacity(evaluated.len());
-    let mut reports = Vec::with_capacity(evaluated.len());
-    for e in evaluated {
-        let (h, s, r) = e?;
-        hypotheses.push(h);
-        starts.push(s);
-        reports.push(r);
-    }
+    let bases = base_matches(&ext_ref.poles, &ext_tgt.poles)?;
+    let scorer = Scorer::new(&clouds, [ground_ref, ground_tgt], options, &deadline)?;
+    let (hypotheses, starts, reports) = scorer.score_all(&bases)?;
     clock.lap("hypotheses");
 
-    let mut order: Vec<usize> = (0..hypotheses.len()).collect();
-    order.sort_by(|&a, &b| hypotheses[a].score.total_cmp(&hypotheses[b].score));
-    let Some(&chosen) = order.first() else {
-        return Err(Error::calibration(
-            FailureKind::Unobservable,
-            "no pair of non-parallel target poles to match",
-        ));
-    };
-    // The runner-up is the best hypothesis that reached a different transform: hypotheses that
-    // refine to the same pose are one solution, not a tie.
-    let best_pose = hypotheses[chosen].reference_from_target;
-    let runner_up = order.iter().copied().skip(1).find(|&j| {
-        let d = hypotheses[j].reference_from_target.inverse() * best_pose;
-        d.rotation.angle() > SAME_POSE_ANGLE || d.translation.vector.norm() > SAME_POSE_DISTANCE
-    });
-    let margin = runner_up.map_or(f64::INFINITY, |j| {
-        hypotheses[j].score - hypotheses[chosen].score
-    });
-    if let Some(j) = runner_up.filter(|_| margin < REFUSE_MARGIN) {
-        let (a, b) = (&hypotheses[chosen], &hypotheses[j]);
-        return Err(Error::calibration(FailureKind::Ambiguous, format!(
-            "ambiguous pole correspondence: the best two hypotheses score {:.3} and {:.3} \
-             (margin {margin:.3} < {REFUSE_MARGIN}; axis RMS {:.4} / {:.4} m, overlap {:.3} / {:.3}); \
-             the scene is symmetric (e.g. two vertical poles on flat ground with nothing else)",
-            a.score, b.score, a.axis_rms, b.axis_rms, a.overlap, b.overlap
-        )));
-    }
+    // Step 6: the lowest score, clear of the runner-up, with every matched pole on its axis.
+    let (chosen, margin) = choose(&hypotheses)?;
     let best = &hypotheses[chosen];
     let pose = best.reference_from_target;
-    let mut poles_reference = Vec::new();
-    let mut poles_target = Vec::new();
-    let mut radii = Vec::new();
-    let mut indices_reference = Vec::new();
-    let mut indices_target = Vec::new();
-    for &(i, k, s) in &best.matches {
-        let (pr, pt) = (&ext_ref.poles[i], &ext_tgt.poles[k]);
-        poles_reference.push(pr.axis);
-        poles_target.push(signed_axis(pt, s));
-        radii.push(match options.pole_radius {
-            Some(r) if options.axis_fit == AxisFit::Cylinder => r,
-            _ => 0.5 * (pr.radius + pt.radius),
-        });
-        indices_reference.push(pr.indices.clone());
-        indices_target.push(pt.indices.clone());
-    }
+    let matched = MatchedPoles::new(&clouds, &best.matches, options);
     let pole_rmse = per_pole_rms(&clouds, &best.matches, options.loss, &pose)?;
-    // A centroid line sits up to a radius in front of the axis and estimates no radius: its
-    // residuals include the pole's thickness, allowed up to LINE_FIT_THICKNESS.
-    let allowed = match options.axis_fit {
-        AxisFit::Cylinder => MAX_POLE_RMSE,
-        AxisFit::Line => MAX_POLE_RMSE + LINE_FIT_THICKNESS,
-    };
-    if let Some((k, worst)) = pole_rmse
-        .iter()
-        .copied()
-        .enumerate()
-        .find(|&(_, r)| !(r.is_finite() && r <= allowed))
-    {
-        return Err(Error::calibration(
-            FailureKind::OutOfRange,
-            format!(
-                "pole {k} lies {worst:.3} m (RMS) from its matched axis at the best pose (> \
-                 {:.3} m; correct matches stay under 1 cm): the poles found in the two \
-                 clouds are not the same poles, or one is barely seen",
-                allowed
-            ),
-        ));
-    }
-    if let Some(r) = radii.iter().find(|r| !(r.is_finite() && **r <= MAX_RADIUS)) {
-        return Err(Error::calibration(
-            FailureKind::OutOfRange,
-            format!("a matched pole has a radius of {r:.2} m (> {MAX_RADIUS} m): not a pole"),
-        ));
-    }
+    check_pole_fit(&pole_rmse, &matched.radii, options.axis_fit)?;
     let report = reports[chosen];
     let covariance = report.as_ref().and_then(|r| r.covariance());
     let rmse = best.axis_rms;
     let initial = starts[chosen];
     clock.lap("choose");
-    // The poles hold the pose only as well as a few hundred tape points can: two near-parallel
-    // axes leave the height along them and the tilt loosely held (4-8 cm and up to 1.5 degrees
-    // off in 1000 adversarial scenes with 2-3 cm noise), which the check then refuses. The
-    // scene's surfaces settle those: when the pole pose fails the check, the check's local
-    // re-alignment from it is taken if it stays near it, the poles still lie within
-    // MAX_POLE_RMSE of their axes there and it passes the check (the pole-only pose fits the
-    // tape's noise too: at the true pose of noisy units the RMS is 2-4 cm, not 1-2). A pole pose
-    // that passes is kept: on clean scans it is the more precise (20 simulated scenes: median
-    // 2.7 mrad / 1.35 cm against 3.1 mrad / 1.5 cm).
-    let pair = PreparedPair::new(reference, target, &options.check)?;
-    let first = pair.check(&pose)?;
-    let (pose, pole_rmse, check) = match first.refusal() {
-        None => (pose, pole_rmse, first),
-        Some(refused) => {
-            // A centroid line's residuals include the pole's thickness (up to 25 cm allowed):
-            // they cannot tell whether the poles still fit, and the scene then moved one of 20
-            // simulated line-fit results 19 cm along a direction it holds only weakly.
-            if options.axis_fit != AxisFit::Cylinder {
-                return Err(refused);
-            }
-            let aligned = first.aligned;
-            let (angle, distance) = pose_error(&aligned, &pose);
-            if angle > SCENE_REFINE_ANGLE || distance > SCENE_REFINE_DISTANCE {
-                return Err(refused);
-            }
-            let rms = per_pole_rms(&clouds, &best.matches, options.loss, &aligned)?;
-            if !rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE) {
-                return Err(refused);
-            }
-            match pair.check(&aligned)? {
-                c if c.failure.is_none() => (aligned, rms, c),
-                _ => return Err(refused),
-            }
-        }
-    };
+
+    // Step 7: the check, and the scene's settling of a pole pose it refuses.
+    let (pose, pole_rmse, check) = settle(&clouds, &best.matches, pose, pole_rmse, options)?;
     clock.lap("certify");
     Ok(PoleCalibration {
         check,
         reference_from_target: pose,
         initial_reference_from_target: initial,
-        poles_reference,
-        poles_target,
-        radii,
-        indices_reference,
-        indices_target,
+        poles_reference: matched.poles_reference,
+        poles_target: matched.poles_target,
+        radii: matched.radii,
+        indices_reference: matched.indices_reference,
+        indices_target: matched.indices_target,
         extractions: [ext_ref, ext_tgt],
         ambiguous: margin < AMBIGUITY_MARGIN,
         hypotheses,
