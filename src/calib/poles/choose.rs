@@ -136,3 +136,50 @@ pub(super) fn check_pole_fit(pole_rmse: &[f64], radii: &[f64], axis_fit: AxisFit
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Isometry3;
+
+    fn hypothesis(score: f64, pose: Isometry3<f64>) -> Hypothesis {
+        Hypothesis {
+            matches: Vec::new(),
+            reference_from_target: pose,
+            axis_rms: 0.0,
+            ground_angle: None,
+            ground_offset: None,
+            overlap: 1.0,
+            score,
+        }
+    }
+
+    #[test]
+    fn choose_measures_the_margin_to_another_pose() {
+        let here = Isometry3::identity();
+        let there = Isometry3::translation(1.0, 0.0, 0.0);
+        // Hypotheses that refined to the same pose are one solution, not a tie.
+        let h = [
+            hypothesis(3.0, there),
+            hypothesis(1.0, here),
+            hypothesis(1.05, here),
+        ];
+        let (chosen, margin) = choose(&h).unwrap();
+        assert_eq!(chosen, 1);
+        assert!((margin - 2.0).abs() < 1e-12, "{margin}");
+        assert_eq!(choose(&h[1..]).unwrap(), (0, f64::INFINITY));
+        // Two poses within REFUSE_MARGIN are indistinguishable.
+        let tie = [hypothesis(1.0, here), hypothesis(1.1, there)];
+        assert!(matches!(choose(&tie), Err(Error::Calibration { .. })));
+        assert!(choose(&[]).is_err());
+    }
+
+    #[test]
+    fn check_pole_fit_allows_centroid_lines_their_thickness() {
+        assert!(check_pole_fit(&[0.01, 0.02], &[0.05, 0.05], AxisFit::Cylinder).is_ok());
+        assert!(check_pole_fit(&[0.1], &[0.05], AxisFit::Cylinder).is_err());
+        assert!(check_pole_fit(&[0.1], &[0.0], AxisFit::Line).is_ok());
+        assert!(check_pole_fit(&[f64::NAN], &[0.05], AxisFit::Line).is_err());
+        assert!(check_pole_fit(&[0.01], &[2.0], AxisFit::Cylinder).is_err());
+    }
+}

@@ -243,6 +243,30 @@ mod tests {
     use crate::geometry::se3_exp;
     use nalgebra::Vector6;
 
+    fn pole(direction: Vector3<f64>) -> DetectedPole {
+        DetectedPole {
+            axis: Line::new(Point3::origin(), direction).unwrap(),
+            radius: 0.05,
+            rms: 0.0,
+            indices: Vec::new(),
+            extent: (0.0, 1.0),
+        }
+    }
+
+    #[test]
+    fn base_matches_pair_the_signs_of_ordered_non_parallel_target_pairs() {
+        let z = pole(Vector3::z());
+        let tilted = pole(Vector3::new(0.3, 0.0, 1.0));
+        let reference = [z.clone(), tilted.clone()];
+        let bases = base_matches(&reference, &[z.clone(), tilted.clone(), z.clone()]).unwrap();
+        // Target pairs (0, 1), (1, 0), (1, 2) and (2, 1): poles 0 and 2 are parallel.
+        assert_eq!(bases.len(), 16);
+        assert_eq!(bases[0], [(0, 0, 1), (1, 1, 1)]);
+        assert_eq!(bases[3], [(0, 0, -1), (1, 1, -1)]);
+        assert_eq!(bases[4], [(0, 1, 1), (1, 0, 1)]);
+        assert!(base_matches(&[z.clone(), z.clone()], &[z, tilted]).is_err());
+    }
+
     #[test]
     fn closed_form_recovers_a_pose_from_two_axes() {
         let truth = se3_exp(&Vector6::new(0.3, -1.2, 0.4, 0.2, -0.1, 2.5));
