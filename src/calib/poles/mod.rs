@@ -1,10 +1,11 @@
-//! Calibration from two (or more) non-parallel poles wrapped in retro-reflective tape, after seed
-//! 003 ("two non-parallel poles"), with its errata fixed: the pole is fitted as a **cylinder
-//! axis**, not as the centroid line of the points (which sits up to a radius in front of the axis,
-//! on the side facing each sensor, so the two sensors' lines are up to a diameter apart).
+//! Calibration from two (or more) non-parallel poles wrapped in retro-reflective tape, after Xue
+//! et al., "Automatic Calibration of Dual-LiDARs Using Two Poles Stickered with Retro-Reflective
+//! Tape" (2019), with the errata of that text fixed: the pole is fitted as a **cylinder axis**, not
+//! as the centroid line of the points (which sits up to a radius in front of the axis, on the side
+//! facing each sensor, so the two sensors' lines are up to a diameter apart).
 //!
 //! # Pipeline
-//! 1. **Intensity threshold.** `vendor` selects the seed's thresholds (Velodyne 230; Hesai,
+//! 1. **Intensity threshold.** `vendor` selects the paper's thresholds (Velodyne 230; Hesai,
 //!    Leishen, RoboSense 200); an explicit `intensity_threshold` wins over it. With neither, the
 //!    threshold comes from the data ([`data_threshold`]): retro-reflective returns are saturated
 //!    outliers of the intensity distribution, separated from the diffuse returns by a wide empty

@@ -6,7 +6,7 @@ use crate::check::CheckOptions;
 use crate::error::{ensure_positive, Error, Result};
 use crate::lm::{LmOptions, Loss};
 
-/// LiDAR vendors with the seed's intensity thresholds.
+/// LiDAR vendors with the intensity thresholds of Xue et al. (2019).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Vendor {
     /// Velodyne: 230.
@@ -20,7 +20,7 @@ pub enum Vendor {
 }
 
 impl Vendor {
-    /// The seed's intensity threshold for this vendor.
+    /// The paper's intensity threshold for this vendor.
     pub fn threshold(self) -> f64 {
         match self {
             Vendor::Velodyne => 230.0,
@@ -48,7 +48,7 @@ pub enum AxisFit {
     /// The cylinder axis (correct: the points lie on the surface facing the sensor).
     #[default]
     Cylinder,
-    /// The least-squares line through the points (the seed's method; biased by up to a radius,
+    /// The least-squares line through the points (the paper's method; biased by up to a radius,
     /// kept for comparison).
     Line,
 }
@@ -58,7 +58,7 @@ pub enum AxisFit {
 pub struct PoleOptions {
     /// Intensity at or above which a return is taped; wins over `vendor`.
     pub intensity_threshold: Option<f64>,
-    /// Selects the seed's threshold when `intensity_threshold` is `None`; with neither, the
+    /// Selects the paper's threshold when `intensity_threshold` is `None`; with neither, the
     /// threshold comes from the data (module docs).
     pub vendor: Option<Vendor>,
     /// Pole radius in metres, or `None` to estimate it per pole.
