@@ -636,7 +636,7 @@ fn calibrate_planes(
 /// vendor: "velodyne" (230), "hesai", "leishen" or "robosense" (200); with neither, the threshold
 ///     is the middle of the highest wide intensity gap above the median (tape is the brightest).
 /// pole_radius: metres, or None to estimate it per pole. axis_fit: "cylinder" (default) or "line"
-///     (the seed's centroid line, biased by up to a radius; for comparison).
+///     (the centroid line of Xue et al., biased by up to a radius; for comparison).
 /// Raises ValueError for malformed input and CalibrationError with the reason (no bright points,
 /// fewer than two poles, parallel poles, indistinguishable hypotheses). time_budget_s: as for
 /// calibrate_planes (a huge cluster_tolerance on a dense cloud makes the clustering quadratic).
