@@ -1,8 +1,9 @@
 //! Quality measures of a calibration without ground truth.
 //!
 //! [`rqe`] is the Rényi quadratic entropy "crispness" of Sheehan, Harrison and Newman
-//! ("Self-calibration for a 3D laser", IJRR 2012), which Xue et al. (2019) use to compare calibrations on
-//! real data: merge the two clouds with the calibration and measure how sharp the result is. With
+//! ("Self-calibration for a 3D laser", IJRR 2012), which Xue et al. (2019) use to compare
+//! calibrations on real data: merge the two clouds with the calibration and measure how sharp the
+//! result is. With
 //! a Gaussian kernel of variance `sigma^2` per point, the entropy of the merged density is
 //! `H = -ln C` with
 //!
