@@ -11,9 +11,10 @@
 //!   the **overlap** when a reference point lies within [`CheckOptions::overlap_distance`], and it
 //!   **agrees** when its distance to the reference surface there (point-to-plane, the surface
 //!   normal from the reference neighbours) is within `3 sigma` of the noise. The noise scale
-//!   comes from each cloud alone (the thickness of its surfaces, [`SurfaceCloud::thickness`]),
-//!   never from the residuals under the pose being checked. The same is done the other way
-//!   (reference points onto the target).
+//!   comes from each cloud alone (the thickness of its surfaces,
+//!   [`SurfaceCloud::thickness`](crate::icp::SurfaceCloud::thickness)), never from the residuals
+//!   under the pose being checked. The same is done the other way (reference points onto the
+//!   target).
 //! * **Free space.** A point of one scan that lands in space the other sensor saw through (in
 //!   front of its nearest return along the same ray, [`crate::visibility`]) is a **violation**.
 //!   The truth leaves only moving objects there; a turned or shifted pose fills it.
@@ -60,16 +61,19 @@
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
-use nalgebra::{Isometry3, Matrix3, Point3, SymmetricEigen, Vector3};
+use nalgebra::{Isometry3, Point3};
 
-use crate::error::{ensure_points, ensure_positive, Error, FailureKind, Result};
-use crate::geometry::{rotation_angle, se3_log};
-use crate::icp::{
-    point_to_plane_icp_with_normals, voxel_downsample, weakest_direction, IcpOptions, SurfaceCloud,
-};
-use crate::visibility::RangeImage;
+use crate::error::{ensure_points, ensure_positive, Error, Result};
 
+mod agreement;
+mod realign;
 mod report;
+mod side;
+mod verdict;
+
+use realign::{correction_excess, Correction, Detectable};
+use side::Side;
+use verdict::{verdict, Findings};
 
 pub use report::{CheckReport, Verdict};
 
@@ -256,126 +260,6 @@ impl CheckOptions {
     }
 }
 
-/// One cloud, downsampled and indexed, with its sensor's range image.
-#[derive(Debug)]
-struct Side {
-    surface: SurfaceCloud,
-    samples: Vec<Point3<f64>>,
-    image: RangeImage,
-}
-
-impl Side {
-    /// The median local thickness of the sampled points that lie on a surface (metres; 0 when
-    /// none does).
-    fn thickness(&self) -> f64 {
-        let mut values: Vec<f64> = (0..self.surface.points().len())
-            .step_by(
-                self.surface
-                    .points()
-                    .len()
-                    .div_ceil(THICKNESS_SAMPLES)
-                    .max(1),
-            )
-            .filter_map(|i| self.surface.thickness(i))
-            .collect();
-        median(&mut values)
-    }
-
-    fn new(points: &[Point3<f64>], options: &CheckOptions) -> Result<Self> {
-        let (indexed, image) = crate::join(
-            || -> Result<_> {
-                let (voxels, _) = voxel_downsample(points, options.voxel_size)?;
-                let stride = voxels.len().div_ceil(options.samples).max(1);
-                let samples = voxels.iter().step_by(stride).copied().collect();
-                Ok((SurfaceCloud::new(voxels)?, samples))
-            },
-            || RangeImage::new(points, options.visibility_resolution),
-        );
-        let ((surface, samples), image) = (indexed?, image?);
-        Ok(Side {
-            surface,
-            samples,
-            image,
-        })
-    }
-}
-
-/// Point-to-plane residuals of `points` mapped by `pose` onto `surface`: `(in overlap, |residual|
-/// of those with a surface normal)`.
-fn residuals(
-    surface: &SurfaceCloud,
-    points: &[Point3<f64>],
-    pose: &Isometry3<f64>,
-    overlap_distance: f64,
-) -> (usize, Vec<f64>) {
-    let mut overlap = 0;
-    let mut out = Vec::with_capacity(points.len());
-    for p in points {
-        let q = pose * p;
-        let Some((i, _)) = surface.nearest(&q, overlap_distance) else {
-            continue;
-        };
-        overlap += 1;
-        let (Some(n), Some(s)) = (surface.normal(i), surface.points().get(i)) else {
-            continue;
-        };
-        out.push(n.dot(&(q - s)).abs());
-    }
-    (overlap, out)
-}
-
-/// Share of `points` (their own sensor's frame) that land in `image`'s free space once mapped by
-/// `image_from_points`, of those it tests ([`RangeImage::tally`]).
-fn violation_share(
-    image: &RangeImage,
-    points: &[Point3<f64>],
-    image_from_points: &Isometry3<f64>,
-) -> f64 {
-    let (violations, tested) = image.tally(points, image_from_points);
-    violations as f64 / tested.max(1) as f64
-}
-
-/// How far `correction` exceeds its tolerance, as a ratio: its part in the subspace of the
-/// eigen-directions of the information `block` holding at least `strong_share` of the trace,
-/// against `fine`, and its part in the others against `weak`; the larger of the two. The parts
-/// are whole vectors, not components one by one: a 9 cm correction spread over three well
-/// constrained directions is 9 cm, not three times 5.2 cm under a 6 cm tolerance.
-fn excess(
-    block: &Matrix3<f64>,
-    correction: &Vector3<f64>,
-    fine: f64,
-    weak: f64,
-    strong_share: f64,
-) -> f64 {
-    let eig = SymmetricEigen::new(*block);
-    let trace = block.trace();
-    let (mut strong, mut loose) = (0.0, 0.0);
-    for i in 0..3 {
-        let share = if trace > 0.0 {
-            eig.eigenvalues[i] / trace
-        } else {
-            0.0
-        };
-        let part = eig.eigenvectors.column(i).dot(correction).powi(2);
-        if share >= strong_share {
-            strong += part;
-        } else {
-            loose += part;
-        }
-    }
-    (strong.sqrt() / fine).max(loose.sqrt() / weak)
-}
-
-/// The median of `values` (0 for none).
-fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let mid = values.len() / 2;
-    let (_, m, _) = values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    *m
-}
-
 /// Checks `reference_from_target` against the two clouds (each in its own sensor's frame). See
 /// the [module docs](self).
 ///
@@ -475,328 +359,54 @@ impl PreparedPair {
     pub fn check(&self, reference_from_target: &Isometry3<f64>) -> Result<CheckReport> {
         ensure_transform(reference_from_target)?;
         let t = reference_from_target;
-        let (r, g, options, noise) = (&self.reference, &self.target, &self.options, self.noise);
-
-        // Residuals both ways at a pose: target samples on the reference surface, reference samples
-        // on the target surface.
-        let both_ways = |pose: &Isometry3<f64>| {
-            let inverse = pose.inverse();
-            crate::join(
-                || residuals(&r.surface, &g.samples, pose, options.overlap_distance),
-                || residuals(&g.surface, &r.samples, &inverse, options.overlap_distance),
-            )
-        };
-        // Agreement both ways at the given pose.
         let inverse = t.inverse();
-        let ((overlap_t, mut res_t), (overlap_r, res_r)) = both_ways(t);
-        let (normals_t, normals_r) = (res_t.len(), res_r.len());
-        let limit = 3.0 * noise;
-        let agree = |res: &[f64]| {
-            if res.is_empty() {
-                0.0
-            } else {
-                res.iter().filter(|r| **r <= limit).count() as f64 / res.len() as f64
-            }
-        };
-        let agreement = agree(&res_t);
-        let reverse_agreement = agree(&res_r);
-        res_t.retain(|r| *r <= limit);
-        let rmse = if res_t.is_empty() {
-            0.0
-        } else {
-            (res_t.iter().map(|r| r * r).sum::<f64>() / res_t.len() as f64).sqrt()
-        };
-        let overlap = overlap_t as f64 / g.samples.len().max(1) as f64;
-        let reverse_overlap = overlap_r as f64 / r.samples.len().max(1) as f64;
-
-        // Free space both ways.
-        let violations = violation_share(&r.image, &g.samples, t);
-        let reverse_violations = violation_share(&g.image, &r.samples, &inverse);
-
+        // Agreement both ways at the given pose, and free space both ways.
+        let agreement = self.agreement(t);
+        let free_space = self.free_space(t);
         // Local re-alignment and observability.
-        let icp_options = IcpOptions {
-            // From a correct pose a 1 m gate let box tops and ground pull a cluttered 16-beam corner
-            // 15 cm off before the gate closed; 30 cm leaves it in place and still pulls back a
-            // 1 degree or 10 cm error.
-            max_distance: REALIGN_START.max(8.0 * noise),
-            // A sparse scene needs the final gate near the noise: at 20 cm, neighbouring scan rings
-            // of a 16-beam unit pulled a corner's pose 30 cm along its weakest direction (at 10 cm
-            // it stayed). Real clouds (2-3 cm thick surfaces) end near 20 cm.
-            min_distance: (8.0 * noise).max(options.voxel_size),
-            samples: options.samples,
-            step_tolerance: REALIGN_STEP_TOLERANCE,
-            ..IcpOptions::default()
-        };
-        // Too few correspondences is a finding (unverifiable); anything else is an error.
-        let icp = match point_to_plane_icp_with_normals(
-            &r.surface,
-            &g.surface,
-            t,
-            &icp_options,
-            MAX_NORMAL_ANGLE,
-        ) {
-            Ok(result) => Some(result),
-            Err(Error::Calibration { .. }) => None,
-            Err(e) => return Err(e),
-        };
-        let (
-            aligned,
-            correction_rotation,
-            correction_translation,
-            weakest_translation,
-            weakest_rotation,
-            covariance,
-        ) = match &icp {
-            Some(icp) => {
-                let delta = icp.pose * inverse;
-                (
-                    icp.pose,
-                    rotation_angle(&delta.rotation.to_rotation_matrix()),
-                    (icp.pose.translation.vector - t.translation.vector).norm(),
-                    weakest_direction(&icp.information.fixed_view::<3, 3>(0, 0).into_owned()),
-                    weakest_direction(&icp.information.fixed_view::<3, 3>(3, 3).into_owned()),
-                    icp.covariance,
-                )
-            }
-            None => (*t, 0.0, 0.0, (Vector3::x(), 0.0), (Vector3::x(), 0.0), None),
-        };
-        let agreement_gain = icp.as_ref().map_or(0.0, |icp| {
-            let ((_, forward), (_, backward)) = both_ways(&icp.pose);
-            (agree(&forward) - agreement).min(agree(&backward) - reverse_agreement)
-        });
-        // Tolerances: the floors, or three standard deviations of the aligned pose where larger.
-        let (sd_t, sd_r) = covariance
-            .map(|c| {
-                let t3 = c
-                    .fixed_view::<3, 3>(0, 0)
-                    .symmetric_eigenvalues()
-                    .amax()
-                    .max(0.0)
-                    .sqrt();
-                let r3 = c
-                    .fixed_view::<3, 3>(3, 3)
-                    .symmetric_eigenvalues()
-                    .amax()
-                    .max(0.0)
-                    .sqrt();
-                (t3, r3)
-            })
-            .unwrap_or((f64::INFINITY, f64::INFINITY));
-        let detectable_rotation = options.rotation_tolerance.max(3.0 * sd_r);
-        let detectable_translation = options.translation_tolerance.max(3.0 * sd_t);
-        // The correction against its tolerance, subspace by subspace: fine along what the overlap
-        // constrains well, weak (a gross error only) along the rest.
+        let icp = self.realign(t)?;
+        let correction = Correction::new(icp.as_ref(), t, &inverse);
+        let agreement_gain = icp
+            .as_ref()
+            .map_or(0.0, |icp| self.agreement_gain(&agreement, &icp.pose));
+        let detectable = Detectable::new(correction.covariance, &self.options);
         let excess = icp.as_ref().map_or(0.0, |icp| {
-            let delta = se3_log(&(icp.pose * inverse));
-            let block = |k: usize| icp.information.fixed_view::<3, 3>(k, k).into_owned();
-            // The move of the target sensor itself (the tangent's translation would add the
-            // rotation's lever arm about the reference origin).
-            let rho = icp.pose.translation.vector - t.translation.vector;
-            let phi = Vector3::new(delta[3], delta[4], delta[5]);
-            let translation = excess(
-                &block(0),
-                &rho,
-                detectable_translation,
-                options
-                    .weak_translation_tolerance
-                    .max(detectable_translation),
-                options.strong_share,
-            );
-            let rotation = excess(
-                &block(3),
-                &phi,
-                detectable_rotation,
-                options.weak_rotation_tolerance.max(detectable_rotation),
-                options.strong_share,
-            );
-            translation.max(rotation)
+            correction_excess(icp, t, &inverse, &detectable, &self.options)
         });
-        // A re-alignment that puts clearly more points into the other sensor's free space (more
-        // than twice the share, plus a point in a hundred) is no evidence against the pose:
-        // point-to-plane agreement alone pulled true 16-beam corners 8-28 cm onto box tops and
-        // neighbouring scan rings, with 2-7 % of the points landing where the other sensor saw
-        // through (the truth: none). Real scans put 3-5 % there at any pose near the truth
-        // (moving objects, noise), so a difference of a point or two says nothing.
-        let (counted_excess, counted_gain, realign_violations) =
-            match &icp {
-                Some(icp) if excess > 1.0 || agreement_gain > options.max_agreement_gain => {
-                    let moved = violation_share(&r.image, &g.samples, &icp.pose)
-                        .max(violation_share(&g.image, &r.samples, &icp.pose.inverse()));
-                    if moved > 2.0 * violations.max(reverse_violations) + REALIGN_FREE_SPACE_MARGIN
-                    {
-                        (0.0, 0.0, Some(moved))
-                    } else {
-                        (excess, agreement_gain, None)
-                    }
-                }
-                _ => (excess, agreement_gain, None),
-            };
-
-        let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
-        let pct = |v: f64| v * 100.0;
-        let (verdict, failure, reason) = if overlap_t < MIN_OVERLAP_POINTS
-            || normals_t.min(normals_r) < MIN_OVERLAP_POINTS / 2
-            || overlap < options.min_overlap
-        {
-            (
-                Verdict::Unverifiable,
-                Some(FailureKind::TooFewFeatures),
-                format!(
-                "too little overlap: {overlap_t} target points ({:.1} %) land within {:.2} m of \
-                 the reference (need {MIN_OVERLAP_POINTS} and {:.1} %)",
-                pct(overlap),
-                options.overlap_distance,
-                pct(options.min_overlap)
-            ),
-            )
-        } else if violations.max(reverse_violations) > options.max_violations {
-            (
-                Verdict::Inconsistent,
-                Some(FailureKind::NoAgreement),
-                format!(
-                "{:.1} % of the target points and {:.1} % of the reference points land in space \
-                 the other sensor saw through (> {:.1} %)",
-                pct(violations),
-                pct(reverse_violations),
-                pct(options.max_violations)
-            ),
-            )
-        } else if agreement.min(reverse_agreement) < options.min_agreement {
-            (
-                Verdict::Inconsistent,
-                Some(FailureKind::NoAgreement),
-                format!(
-                "only {:.1} % of the overlapping target points and {:.1} % of the reference points \
-                 lie within {:.1} cm of the other's surface (< {:.0} %)",
-                pct(agreement),
-                pct(reverse_agreement),
-                limit * 100.0,
-                pct(options.min_agreement)
-            ),
-            )
-        } else if icp.is_none() {
-            (
-                Verdict::Unverifiable,
-                Some(FailureKind::TooFewFeatures),
-                "the local re-alignment found too few correspondences".to_string(),
-            )
-        } else if counted_excess > 1.0 {
-            (
-            Verdict::Inconsistent,
-            Some(FailureKind::NoAgreement),
-            format!(
-                "the scene prefers a pose {:.2} deg / {:.1} cm away (tolerance {:.2} deg / {:.1} cm \
-                 where the overlap constrains the pose well, {:.1} deg / {:.0} cm where it does not)",
-                correction_rotation.to_degrees(),
-                correction_translation * 100.0,
-                detectable_rotation.to_degrees(),
-                detectable_translation * 100.0,
-                options.weak_rotation_tolerance.to_degrees(),
-                options.weak_translation_tolerance * 100.0
-            ),
-        )
-        } else if counted_gain > options.max_agreement_gain {
-            (
-                Verdict::Inconsistent,
-                Some(FailureKind::NoAgreement),
-                format!(
-                "a pose {:.2} deg / {:.1} cm away fits clearly more points: the agreement rises by \
-                 {:.1} points both ways (> {:.1})",
-                correction_rotation.to_degrees(),
-                correction_translation * 100.0,
-                pct(agreement_gain),
-                pct(options.max_agreement_gain)
-            ),
-            )
-        } else if weakest_translation.1 < options.min_information_share {
-            (
-                Verdict::Unverifiable,
-                Some(FailureKind::Unobservable),
-                format!(
-                    "the overlap does not constrain the translation along {} ({:.2} % of the \
-                 information < {:.2} %): an error along it would go unseen",
-                    fmt(&weakest_translation.0),
-                    pct(weakest_translation.1),
-                    pct(options.min_information_share)
-                ),
-            )
-        } else if weakest_rotation.1 < options.min_information_share {
-            (
-                Verdict::Unverifiable,
-                Some(FailureKind::Unobservable),
-                format!(
-                "the overlap does not constrain the rotation about {} ({:.2} % of the information \
-                 < {:.2} %): an error about it would go unseen",
-                fmt(&weakest_rotation.0),
-                pct(weakest_rotation.1),
-                pct(options.min_information_share)
-            ),
-            )
-        } else {
-            (
-                Verdict::Consistent,
-                None,
-                match realign_violations {
-                    None => format!(
-                        "the clouds agree and a local re-alignment moves the pose by {:.2} deg / \
-                         {:.1} cm",
-                        correction_rotation.to_degrees(),
-                        correction_translation * 100.0
-                    ),
-                    Some(moved) => format!(
-                        "the clouds agree; a local re-alignment {:.2} deg / {:.1} cm away fits the \
-                         surfaces better but puts {:.1} % of the points into the other sensor's \
-                         free space (here {:.1} %)",
-                        correction_rotation.to_degrees(),
-                        correction_translation * 100.0,
-                        pct(moved),
-                        pct(violations.max(reverse_violations))
-                    ),
-                },
-            )
-        };
+        let counted = self.counted(icp.as_ref(), excess, agreement_gain, &free_space);
+        // The verdict and its reason.
+        let (verdict, failure, reason) = verdict(&Findings {
+            agreement: &agreement,
+            free_space: &free_space,
+            realigned: icp.is_some(),
+            correction: &correction,
+            agreement_gain,
+            detectable: &detectable,
+            counted: &counted,
+            options: &self.options,
+        });
         Ok(CheckReport {
             verdict,
             reason,
-            overlap,
-            reverse_overlap,
-            agreement,
-            reverse_agreement,
+            overlap: agreement.overlap,
+            reverse_overlap: agreement.reverse_overlap,
+            agreement: agreement.agreement,
+            reverse_agreement: agreement.reverse_agreement,
             agreement_gain,
-            violations,
-            reverse_violations,
-            rmse,
-            noise,
-            overlap_points: overlap_t,
-            aligned,
-            correction_rotation,
-            correction_translation,
-            weakest_translation,
-            weakest_rotation,
-            detectable_rotation,
-            detectable_translation,
-            covariance,
+            violations: free_space.violations,
+            reverse_violations: free_space.reverse_violations,
+            rmse: agreement.rmse,
+            noise: self.noise,
+            overlap_points: agreement.overlap_points,
+            aligned: correction.aligned,
+            correction_rotation: correction.rotation,
+            correction_translation: correction.translation,
+            weakest_translation: correction.weakest_translation,
+            weakest_rotation: correction.weakest_rotation,
+            detectable_rotation: detectable.rotation,
+            detectable_translation: detectable.translation,
+            covariance: correction.covariance,
             failure,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn excess_takes_the_correction_in_each_subspace_as_a_whole() {
-        // Isotropic information: every direction is well constrained. A 9 cm correction split
-        // evenly over the three axes (5.2 cm each) exceeds a 6 cm tolerance.
-        let iso = Matrix3::identity();
-        let spread = Vector3::new(1.0, 1.0, 1.0).normalize() * 0.09;
-        assert!(excess(&iso, &spread, 0.06, 0.5, 0.05) > 1.4);
-        assert!(excess(&iso, &(spread * 0.5), 0.06, 0.5, 0.05) < 1.0);
-        // A direction holding 1 % of the information only counts against the weak tolerance.
-        let weak_z = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.02));
-        assert!(excess(&weak_z, &Vector3::new(0.0, 0.0, 0.4), 0.06, 0.5, 0.05) < 1.0);
-        assert!(excess(&weak_z, &Vector3::new(0.0, 0.0, 0.6), 0.06, 0.5, 0.05) > 1.0);
-        assert!(excess(&weak_z, &Vector3::new(0.05, 0.05, 0.0), 0.06, 0.5, 0.05) > 1.0);
     }
 }
