@@ -606,16 +606,12 @@ fn planes_land_on_planes(
     Ok(())
 }
 
-/// Calibrates `reference_from_target` from a wall corner seen by both sensors (see the module docs).
-///
-/// Errors: [`Error::InvalidInput`] for malformed input; [`Error::Calibration`] when three planes
-/// with enough inliers are not found in a cloud, the planes are not linearly independent, the
-/// correspondence is ambiguous without a tie-break, or the refined planes do not agree.
-pub fn calibrate_planes(
+/// `Err(InvalidInput)` for a malformed cloud ([`check_cloud`]), loss or distance threshold.
+fn validate(
     reference: &[Point3<f64>],
     target: &[Point3<f64>],
     options: &PlanarOptions,
-) -> Result<PlanarCalibration> {
+) -> Result<()> {
     check_cloud(reference, "reference")?;
     check_cloud(target, "target")?;
     if let Some(loss) = options.loss {
@@ -628,10 +624,17 @@ pub fn calibrate_planes(
             )));
         }
     }
-    let deadline = Deadline::new(options.time_budget);
-    let mut clock = Stopwatch::start();
+    Ok(())
+}
 
-    // Threshold and planes of each cloud; the two clouds are independent, so they run side by side.
+/// The inlier threshold and the three planes (right-handed) of each cloud, `[reference, target]`;
+/// the two clouds are independent, so they run side by side.
+fn extract_both(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    options: &PlanarOptions,
+    deadline: &Deadline,
+) -> Result<([f64; 2], [Vec<ExtractedPlane>; 2])> {
     let per_cloud = |points: &[Point3<f64>], which: &str| -> Result<(f64, Vec<ExtractedPlane>)> {
         let threshold = match options.distance_threshold {
             Some(t) => t,
@@ -640,7 +643,7 @@ pub fn calibrate_planes(
         let mut o = ExtractOptions::new(3, threshold);
         o.min_inliers = options.min_inliers;
         o.ransac.seed = options.seed;
-        o.ransac.deadline = Some(deadline);
+        o.ransac.deadline = Some(*deadline);
         o.min_angle_between = Some(MIN_PLANE_ANGLE);
         let planes = extract_planes(points, &o).map_err(|e| with_cloud(e, which))?;
         Ok((threshold, right_handed(planes)))
@@ -651,13 +654,33 @@ pub fn calibrate_planes(
     );
     let (threshold_ref, found_ref) = ref_result?;
     let (threshold_tgt, found_tgt) = tgt_result?;
-    let thresholds = [threshold_ref, threshold_tgt];
-    clock.lap("planes");
-    deadline.check("plane extraction")?;
+    Ok(([threshold_ref, threshold_tgt], [found_ref, found_tgt]))
+}
 
+/// The planes of the two clouds, checked (wide enough, independent normals) and matched: the
+/// target's in the order of the reference's.
+struct Matched<'a> {
+    planes_ref: [Plane; 3],
+    /// The target's planes in matched order.
+    planes_tgt: [Plane; 3],
+    /// The target's extracted planes in matched order.
+    matched_tgt: Vec<&'a ExtractedPlane>,
+    ordering: Ordering,
+    /// The rotation of the chosen ordering (Kabsch on the normals).
+    rotation: nalgebra::Rotation3<f64>,
+}
+
+/// Checks the extracted planes of both clouds and matches them ([`match_planes`]).
+fn match_found<'a>(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    found_ref: &[ExtractedPlane],
+    found_tgt: &'a [ExtractedPlane],
+    options: &PlanarOptions,
+) -> Result<Matched<'a>> {
     for (points, found, which) in [
-        (reference, &found_ref, "reference"),
-        (target, &found_tgt, "target"),
+        (reference, found_ref, "reference"),
+        (target, found_tgt, "target"),
     ] {
         check_widths(points, found, options.min_plane_width, which)?;
     }
@@ -673,13 +696,34 @@ pub fn calibrate_planes(
         matched_tgt[1].plane,
         matched_tgt[2].plane,
     ];
-    clock.lap("match");
+    Ok(Matched {
+        planes_ref,
+        planes_tgt,
+        matched_tgt,
+        ordering,
+        rotation,
+    })
+}
 
-    let corner_ref = corner(&planes_ref)?;
-    let corner_tgt = corner(&planes_tgt)?;
+/// The closed-form pose: the matched rotation, and the translation that maps the target's corner
+/// (the planes' intersection) onto the reference's. Returns `([reference corner, target corner],
+/// pose)`.
+fn closed_form(matched: &Matched<'_>) -> Result<([Point3<f64>; 2], Isometry3<f64>)> {
+    let rotation = matched.rotation;
+    let corner_ref = corner(&matched.planes_ref)?;
+    let corner_tgt = corner(&matched.planes_tgt)?;
     let initial = isometry(&rotation, corner_ref.coords - rotation * corner_tgt.coords);
-    clock.lap("closed_form");
+    Ok(([corner_ref, corner_tgt], initial))
+}
 
+/// The inlier indices of three planes.
+type Inliers = [Vec<usize>; 3];
+
+/// The inliers of the reference's planes and of the target's in matched order.
+fn matched_inliers(
+    found_ref: &[ExtractedPlane],
+    matched_tgt: &[&ExtractedPlane],
+) -> Result<(Inliers, Inliers)> {
     let inliers_ref: [Vec<usize>; 3] = to_array(
         &found_ref
             .iter()
@@ -692,9 +736,35 @@ pub fn calibrate_planes(
             .map(|p| p.inliers.clone())
             .collect::<Vec<_>>(),
     )?;
-    let select = |points: &[Point3<f64>], idx: &[usize]| -> Vec<Point3<f64>> {
-        idx.iter().filter_map(|&i| points.get(i).copied()).collect()
-    };
+    Ok((inliers_ref, inliers_tgt))
+}
+
+/// The points of `points` at the indices `idx`.
+fn select(points: &[Point3<f64>], idx: &[usize]) -> Vec<Point3<f64>> {
+    idx.iter().filter_map(|&i| points.get(i).copied()).collect()
+}
+
+/// The matched planes and their inliers: the target's inliers on each reference plane and the
+/// reference's on each target plane.
+struct PlanePairs<'a> {
+    reference: &'a [Point3<f64>],
+    target: &'a [Point3<f64>],
+    planes_ref: &'a [Plane; 3],
+    planes_tgt: &'a [Plane; 3],
+    inliers_ref: &'a [Vec<usize>; 3],
+    inliers_tgt: &'a [Vec<usize>; 3],
+}
+
+/// The least-squares problem on the sufficient statistics (moments) of the plane pairs.
+fn moments_problem(pairs: &PlanePairs<'_>) -> Result<PlaneMomentsProblem> {
+    let PlanePairs {
+        reference,
+        target,
+        planes_ref,
+        planes_tgt,
+        inliers_ref,
+        inliers_tgt,
+    } = *pairs;
     let mut moment_groups = Vec::with_capacity(6);
     for i in 0..3 {
         moment_groups.push(PlaneMomentGroup {
@@ -708,15 +778,35 @@ pub fn calibrate_planes(
             frame: Frame::Reference,
         });
     }
-    let moments_problem = PlaneMomentsProblem::new(moment_groups)?;
+    PlaneMomentsProblem::new(moment_groups)
+}
 
+/// The refined pose and its report (LM on the moments, then IRLS under a robust loss), or the
+/// closed-form pose `initial` unrefined when [`PlanarOptions::refine`] is off.
+fn refine(
+    pairs: &PlanePairs<'_>,
+    moments_problem: &PlaneMomentsProblem,
+    initial: &Isometry3<f64>,
+    thresholds: [f64; 2],
+    options: &PlanarOptions,
+    deadline: &Deadline,
+) -> Result<(Isometry3<f64>, Option<LmReport>)> {
+    let PlanePairs {
+        reference,
+        target,
+        planes_ref,
+        planes_tgt,
+        inliers_ref,
+        inliers_tgt,
+    } = *pairs;
+    let initial = *initial;
     let loss = options.loss.unwrap_or(Loss::Cauchy {
         scale: DEFAULT_CAUCHY_SCALE * thresholds[0].max(thresholds[1]),
     });
     let (pose, report) = if options.refine {
         // The exact least-squares solution on the sufficient statistics costs microseconds; a
         // robust loss then starts from it and needs only a few passes over the points.
-        let least_squares = solve(&moments_problem, &initial, &options.lm)?;
+        let least_squares = solve(moments_problem, &initial, &options.lm)?;
         let solution = match loss {
             Loss::Squared => least_squares,
             loss => {
@@ -737,7 +827,7 @@ pub fn calibrate_planes(
                     &PointToPlane::new(groups, loss)?,
                     &least_squares,
                     &options.lm,
-                    &deadline,
+                    deadline,
                 )?
             }
         };
@@ -745,10 +835,20 @@ pub fn calibrate_planes(
     } else {
         (initial, None)
     };
-    clock.lap("refine");
+    Ok((pose, report))
+}
 
-    // Per-plane RMS over both directions, and the agreement check.
-    let group_rms = moments_problem.group_rms(&pose);
+/// Per-plane RMS over both directions at `pose`; after a refinement, `Err(NoAgreement)` when a
+/// plane's exceeds twice the larger inlier threshold.
+fn plane_rmse(
+    pairs: &PlanePairs<'_>,
+    moments_problem: &PlaneMomentsProblem,
+    pose: &Isometry3<f64>,
+    thresholds: [f64; 2],
+    options: &PlanarOptions,
+) -> Result<[f64; 3]> {
+    let (inliers_ref, inliers_tgt) = (pairs.inliers_ref, pairs.inliers_tgt);
+    let group_rms = moments_problem.group_rms(pose);
     let mut rmse = [0.0; 3];
     for i in 0..3 {
         let (n_t, n_r) = (inliers_tgt[i].len() as f64, inliers_ref[i].len() as f64);
@@ -766,6 +866,59 @@ pub fn calibrate_planes(
             ));
         }
     }
+    Ok(rmse)
+}
+
+/// Calibrates `reference_from_target` from a wall corner seen by both sensors (see the module docs).
+///
+/// Errors: [`Error::InvalidInput`] for malformed input; [`Error::Calibration`] when three planes
+/// with enough inliers are not found in a cloud, the planes are not linearly independent, the
+/// correspondence is ambiguous without a tie-break, or the refined planes do not agree.
+pub fn calibrate_planes(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    options: &PlanarOptions,
+) -> Result<PlanarCalibration> {
+    validate(reference, target, options)?;
+    let deadline = Deadline::new(options.time_budget);
+    let mut clock = Stopwatch::start();
+
+    // Threshold and planes of each cloud.
+    let (thresholds, [found_ref, found_tgt]) = extract_both(reference, target, options, &deadline)?;
+    clock.lap("planes");
+    deadline.check("plane extraction")?;
+
+    // The planes checked and matched (ordering of the target's by Kabsch on the normals).
+    let matched = match_found(reference, target, &found_ref, &found_tgt, options)?;
+    clock.lap("match");
+
+    // The closed-form initial pose from the corners.
+    let (corners, initial) = closed_form(&matched)?;
+    clock.lap("closed_form");
+
+    // LM (and the robust refinement) on the matched planes' inliers.
+    let (inliers_ref, inliers_tgt) = matched_inliers(&found_ref, &matched.matched_tgt)?;
+    let pairs = PlanePairs {
+        reference,
+        target,
+        planes_ref: &matched.planes_ref,
+        planes_tgt: &matched.planes_tgt,
+        inliers_ref: &inliers_ref,
+        inliers_tgt: &inliers_tgt,
+    };
+    let moments_problem = moments_problem(&pairs)?;
+    let (pose, report) = refine(
+        &pairs,
+        &moments_problem,
+        &initial,
+        thresholds,
+        options,
+        &deadline,
+    )?;
+    clock.lap("refine");
+
+    // Per-plane RMS over both directions, and the agreement check.
+    let rmse = plane_rmse(&pairs, &moments_problem, &pose, thresholds, options)?;
     let covariance = report.as_ref().and_then(|r| r.covariance());
     clock.lap("check");
     planes_land_on_planes(
@@ -778,6 +931,12 @@ pub fn calibrate_planes(
     let check = certify(reference, target, &pose, &options.check)?;
     clock.lap("certify");
 
+    let Matched {
+        planes_ref,
+        planes_tgt,
+        ordering,
+        ..
+    } = matched;
     Ok(PlanarCalibration {
         check,
         reference_from_target: pose,
@@ -786,7 +945,7 @@ pub fn calibrate_planes(
         planes_target: planes_tgt,
         inliers_reference: inliers_ref,
         inliers_target: inliers_tgt,
-        corners: [corner_ref, corner_tgt],
+        corners,
         rmse,
         ordering,
         distance_thresholds: thresholds,
