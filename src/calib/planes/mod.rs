@@ -17,7 +17,7 @@
 //! 3. **Conditioning.** The three normals must be linearly independent: the smallest singular value
 //!    of the matrix of normals must be at least [`MIN_NORMAL_SINGULAR_VALUE`] (planes within about
 //!    16 degrees of parallel are refused).
-//! 4. **Corner.** The intersection point `o` solves `N o = -d` (the seed's eq. 3).
+//! 4. **Corner.** The intersection point `o` solves `N o = -d` (eq. 3 of Jiao et al.).
 //! 5. **Correspondence.** Each cloud's planes are put in right-handed order
 //!    (`(n_1 x n_2) . n_3 > 0`). With normals oriented toward the sensors, a correspondence must
 //!    keep that handedness, so only the 3 cyclic shifts remain. Each is scored by the RMS
@@ -29,9 +29,9 @@
 //!    mixes translation into rotation), `t = o_ref - R o_tgt` (not `o' - o`).
 //! 7. **Refinement.** Levenberg–Marquardt over the symmetric point-to-plane cost: target inliers
 //!    against reference planes plus reference inliers against target planes, an ordinary sum of
-//!    squares (the seed's eq. 8 squares a sum of squares) under a Cauchy loss at the noise level
+//!    squares (eq. 8 of Jiao et al. squares a sum of squares) under a Cauchy loss at the noise level
 //!    by default, so that clutter inside the inlier bands does not bias it. The least-squares
-//!    solution runs on per-plane sufficient statistics ([`PlaneMomentsProblem`], exact); a robust
+//!    solution runs on per-plane sufficient statistics ([`PlaneMomentsProblem`](crate::residuals::PlaneMomentsProblem), exact); a robust
 //!    loss then iterates from it by reweighting (IRLS), each round one pass over the points and an
 //!    exact weighted solve on weighted moments.
 //! 8. **Check.** If a plane's RMS residual after refinement exceeds twice its threshold, the two
@@ -42,21 +42,25 @@
 //!    the pose passes through [`crate::check`] ([`PlanarOptions::check`], by default
 //!    [`CheckOptions::fitted`]).
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::{Stopwatch, Timings};
 use crate::budget::Deadline;
 use crate::check::{certify, CheckOptions, CheckReport};
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
-use crate::geometry::se3_log;
 use crate::geometry::Plane;
-use crate::icp::SurfaceCloud;
-use crate::kabsch::kabsch;
-use crate::lm::{solve, LeastSquaresProblem, LmOptions, LmReport, LmSolution, Loss, Termination};
+use crate::lm::{LmOptions, LmReport, Loss};
 use crate::ransac::plane::{extract_planes, ransac_plane, ExtractOptions, ExtractedPlane};
 use crate::ransac::RansacOptions;
-use crate::residuals::{Frame, PlaneGroup, PlaneMomentGroup, PlaneMomentsProblem, PointToPlane};
+
+mod gates;
+mod matching;
+mod refine;
+
+use gates::{plane_rmse, planes_land_on_planes};
+use matching::{closed_form, match_found, right_handed, Matched};
+use refine::{matched_inliers, moments_problem, refine, PlanePairs};
 
 /// Smallest accepted singular value of the 3x3 matrix of plane normals.
 pub const MIN_NORMAL_SINGULAR_VALUE: f64 = 0.2;
@@ -248,60 +252,8 @@ pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
     Ok(threshold)
 }
 
-fn normals(planes: &[Plane; 3]) -> [Vector3<f64>; 3] {
-    planes.map(|p| p.normal.into_inner())
-}
-
-fn check_conditioning(planes: &[Plane; 3], which: &str) -> Result<()> {
-    let [a, b, c] = normals(planes);
-    let m = Matrix3::from_columns(&[a, b, c]);
-    let smallest = m.singular_values().min();
-    if smallest < MIN_NORMAL_SINGULAR_VALUE {
-        let angle =
-            |u: &Vector3<f64>, v: &Vector3<f64>| u.dot(v).abs().min(1.0).acos().to_degrees();
-        let closest = angle(&a, &b).min(angle(&a, &c)).min(angle(&b, &c));
-        return Err(Error::calibration(
-            FailureKind::TooFewFeatures,
-            format!(
-            "the three planes of the {which} cloud are not linearly independent: smallest singular \
-             value of the normals {smallest:.3} < {MIN_NORMAL_SINGULAR_VALUE} (two planes are \
-             {closest:.1} deg from parallel, or all three share a direction)"
-        ),
-        ));
-    }
-    Ok(())
-}
-
-/// The point where three planes meet.
-fn corner(planes: &[Plane; 3]) -> Result<Point3<f64>> {
-    let [a, b, c] = normals(planes);
-    let m = Matrix3::from_rows(&[a.transpose(), b.transpose(), c.transpose()]);
-    let rhs = Vector3::new(-planes[0].offset, -planes[1].offset, -planes[2].offset);
-    m.lu().solve(&rhs).map(Point3::from).ok_or_else(|| {
-        Error::calibration(
-            FailureKind::TooFewFeatures,
-            "the three planes do not meet in a point",
-        )
-    })
-}
-
-/// Puts three planes (with their inliers) in right-handed order: `(n0 x n1) . n2 > 0`.
-fn right_handed(mut planes: Vec<ExtractedPlane>) -> Vec<ExtractedPlane> {
-    if planes.len() == 3 {
-        let (a, b, c) = (
-            planes[0].plane.normal,
-            planes[1].plane.normal,
-            planes[2].plane.normal,
-        );
-        if a.cross(&b).dot(&c) < 0.0 {
-            planes.swap(1, 2);
-        }
-    }
-    planes
-}
-
 /// Scale of the default Cauchy loss relative to the inlier threshold (3 sigma): 1 sigma. On the
-/// seed's protocol it gives a mean rotation error of 1.49 mrad against 1.52 at 1.5 sigma and 1.54
+/// paper's protocol it gives a mean rotation error of 1.49 mrad against 1.52 at 1.5 sigma and 1.54
 /// at 2 sigma; the wider scales converge in fewer reweighting rounds (about half at 2 sigma on a
 /// 64-beam scan) and are available through `loss`.
 pub const DEFAULT_CAUCHY_SCALE: f64 = 1.0 / 3.0;
@@ -314,76 +266,6 @@ pub const IRLS_RELATIVE_STEP: f64 = 1e-3;
 /// ... or, whatever the covariance, by less than this (tangent norm: 10 nm, 0.01 micro-radian).
 pub const IRLS_STEP_TOLERANCE: f64 = 1e-8;
 
-/// Robust refinement by iteratively reweighted least squares on weighted sufficient statistics:
-/// each round weights the points by `rho'(r^2)` at the current pose (one pass) and solves that
-/// weighted problem exactly on its moments. The fixed point is a stationary point of the robust
-/// cost, the same estimate a robust Levenberg–Marquardt reaches, at a fraction of the passes
-/// over the points. The report is the last round's, with the robust cost at the start and end.
-fn irls(
-    problem: &PointToPlane,
-    start: &LmSolution,
-    lm: &LmOptions,
-    deadline: &Deadline,
-) -> Result<LmSolution> {
-    let smallest_sd = start
-        .report
-        .covariance()
-        .map(|c| {
-            c.diagonal()
-                .iter()
-                .fold(f64::INFINITY, |m, &v| m.min(v.max(0.0).sqrt()))
-        })
-        .filter(|sd| sd.is_finite())
-        .unwrap_or(0.0);
-    let tolerance = (IRLS_RELATIVE_STEP * smallest_sd).max(IRLS_STEP_TOLERANCE);
-    let mut solution = *start;
-    let mut iterations = start.report.iterations;
-    let mut converged = false;
-    for _ in 0..IRLS_MAX_ROUNDS {
-        deadline.check("the robust refinement")?;
-        let weighted = problem.reweighted(&solution.pose)?;
-        let next = solve(&weighted, &solution.pose, lm)?;
-        iterations += next.report.iterations;
-        let step = se3_log(&(next.pose * solution.pose.inverse())).norm();
-        solution = next;
-        if step < tolerance {
-            converged = true;
-            break;
-        }
-    }
-    solution.report.iterations = iterations;
-    solution.report.initial_cost = problem.normal_equations(&start.pose, false).cost;
-    solution.report.final_cost = problem.normal_equations(&solution.pose, false).cost;
-    if !converged {
-        solution.report.termination = Termination::MaxIterations;
-    }
-    Ok(solution)
-}
-
-/// `Err(TooFewFeatures)` when a plane's inliers span less than `min_width` along their shorter
-/// in-plane axis (the side of a uniform patch with that spread, `sqrt(12 l)`).
-fn check_widths(
-    points: &[Point3<f64>],
-    found: &[ExtractedPlane],
-    min_width: f64,
-    which: &str,
-) -> Result<()> {
-    for (k, plane) in found.iter().enumerate() {
-        let [_, width] =
-            Moments::from_points(plane.inliers.iter().filter_map(|&i| points.get(i))).extents();
-        if width < min_width {
-            return Err(Error::calibration(
-                FailureKind::TooFewFeatures,
-                format!(
-                    "{which} cloud: plane {k} spans only {width:.2} m across (< min_plane_width \
-                     {min_width} m): the face of a box or a post, not a wall or the ground"
-                ),
-            ));
-        }
-    }
-    Ok(())
-}
-
 /// Prefixes calibration errors with the cloud they concern.
 fn with_cloud(e: Error, which: &str) -> Error {
     match e {
@@ -392,16 +274,6 @@ fn with_cloud(e: Error, which: &str) -> Error {
         }
         e @ Error::Calibration { .. } => e.context(&format!("{which} cloud")),
         other => other,
-    }
-}
-
-fn to_array<T: Clone>(v: &[T]) -> Result<[T; 3]> {
-    match v {
-        [a, b, c] => Ok([a.clone(), b.clone(), c.clone()]),
-        _ => Err(Error::calibration(
-            FailureKind::TooFewFeatures,
-            format!("expected 3 planes, got {}", v.len()),
-        )),
     }
 }
 
@@ -440,182 +312,12 @@ fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
     Ok(())
 }
 
-/// Matches the planes and returns the chosen cyclic shift with its rotation.
-fn match_planes(
-    reference: &[Plane; 3],
-    target: &[Plane; 3],
-    up: Option<(Vector3<f64>, Vector3<f64>)>,
-) -> Result<(Ordering, nalgebra::Rotation3<f64>)> {
-    let a = normals(reference);
-    let b = normals(target);
-    let mut rotations = Vec::with_capacity(3);
-    let mut scores = [0.0; 3];
-    for (k, score) in scores.iter_mut().enumerate() {
-        let shifted = [b[k % 3], b[(k + 1) % 3], b[(k + 2) % 3]];
-        let solution = kabsch(&a, &shifted, None)?;
-        *score = (solution.residual / 3.0).sqrt();
-        rotations.push(solution.rotation);
-    }
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| scores[i].total_cmp(&scores[j]));
-    let margin = scores[order[1]] - scores[order[0]];
-    let mut chosen = order[0];
-    let mut used_up = false;
-    if margin < AMBIGUITY_RMS {
-        let Some((up_ref, up_tgt)) = up else {
-            return Err(Error::calibration(
-                FailureKind::Ambiguous,
-                format!(
-                    "ambiguous plane correspondence: two orderings fit the normals equally well \
-                 (RMS misalignment {:.3} and {:.3} deg; the corner's angles are nearly equal, \
-                 as in a cube corner); pass `up`, the gravity direction in each sensor's frame, \
-                 to break the tie",
-                    scores[order[0]].to_degrees(),
-                    scores[order[1]].to_degrees()
-                ),
-            ));
-        };
-        if up_ref.norm() == 0.0 || up_tgt.norm() == 0.0 {
-            return Err(Error::InvalidInput("up vectors must be non-zero".into()));
-        }
-        let candidates: Vec<usize> = order
-            .iter()
-            .copied()
-            .filter(|&k| scores[k] - scores[order[0]] < AMBIGUITY_RMS)
-            .collect();
-        let up_error = |k: usize| {
-            let mapped = rotations[k] * up_tgt.normalize();
-            mapped.dot(&up_ref.normalize()).clamp(-1.0, 1.0).acos()
-        };
-        let mut by_up = candidates.clone();
-        by_up.sort_by(|&i, &j| up_error(i).total_cmp(&up_error(j)));
-        if by_up.len() > 1 && up_error(by_up[1]) - up_error(by_up[0]) < UP_TIE_BREAK_MARGIN {
-            return Err(Error::calibration(
-                FailureKind::Ambiguous,
-                format!(
-                    "ambiguous plane correspondence, and `up` does not break the tie (up errors \
-                 {:.1} and {:.1} deg)",
-                    up_error(by_up[0]).to_degrees(),
-                    up_error(by_up[1]).to_degrees()
-                ),
-            ));
-        }
-        chosen = by_up[0];
-        used_up = true;
-    }
-    let rotation = rotations[chosen];
-    Ok((
-        Ordering {
-            scores,
-            chosen,
-            margin,
-            used_up,
-        },
-        rotation,
-    ))
-}
-
-/// Points of each cloud (at most, by a fixed stride) indexed for [`planes_land_on_planes`].
-const LABEL_SAMPLES: usize = 30_000;
-
-/// `Err(NoAgreement)` when the inliers of a matched plane, mapped onto the other cloud, mostly
-/// land nearest to points that are not inliers of its partner there: the two were different
-/// surfaces, usually parallel and close (a pavement or kerb taken for the ground in one cloud, a
-/// box top), so the three planes agree with one another but not with the scene. Each mapped inlier
-/// (a stride sample) whose nearest point of the other cloud lies within the check's overlap
-/// distance counts; the share whose nearest point is an inlier of the partner plane must reach
-/// [`MIN_PLANE_AGREEMENT`].
-fn planes_land_on_planes(
-    reference: &[Point3<f64>],
-    target: &[Point3<f64>],
-    inliers: [&[Vec<usize>; 3]; 2],
-    pose: &Isometry3<f64>,
-    overlap_distance: f64,
-) -> Result<()> {
-    // Each cloud's stride sample with the matched plane of each point (if any).
-    let labelled = |points: &[Point3<f64>], inliers: &[Vec<usize>; 3]| -> Result<_> {
-        let mut label = vec![usize::MAX; points.len()];
-        for (k, idx) in inliers.iter().enumerate() {
-            for &i in idx {
-                if let Some(l) = label.get_mut(i) {
-                    *l = k;
-                }
-            }
-        }
-        let stride = points.len().div_ceil(LABEL_SAMPLES).max(1);
-        let (kept, labels): (Vec<Point3<f64>>, Vec<usize>) = points
-            .iter()
-            .zip(label)
-            .step_by(stride)
-            .map(|(p, l)| (*p, l))
-            .unzip();
-        Ok((SurfaceCloud::new(kept)?, labels))
-    };
-    let (r, t) = crate::join(
-        || labelled(reference, inliers[0]),
-        || labelled(target, inliers[1]),
-    );
-    let ((ref_cloud, ref_labels), (tgt_cloud, tgt_labels)) = (r?, t?);
-    let inverse = pose.inverse();
-    for (k, (ref_idx, tgt_idx)) in inliers[0].iter().zip(inliers[1].iter()).enumerate() {
-        for (points, idx, onto, labels, map, which, other) in [
-            (
-                target,
-                tgt_idx,
-                &ref_cloud,
-                &ref_labels,
-                pose,
-                "target",
-                "reference",
-            ),
-            (
-                reference,
-                ref_idx,
-                &tgt_cloud,
-                &tgt_labels,
-                &inverse,
-                "reference",
-                "target",
-            ),
-        ] {
-            let stride = idx.len().div_ceil(PLANE_AGREEMENT_SAMPLES).max(1);
-            let (mut overlap, mut agreeing) = (0usize, 0usize);
-            for p in idx.iter().step_by(stride).filter_map(|&i| points.get(i)) {
-                if let Some((j, _)) = onto.nearest(&(map * p), overlap_distance) {
-                    overlap += 1;
-                    agreeing += usize::from(labels.get(j) == Some(&k));
-                }
-            }
-            let share = agreeing as f64 / overlap.max(1) as f64;
-            if overlap >= MIN_PLANE_OVERLAP && share < MIN_PLANE_AGREEMENT {
-                return Err(Error::calibration(
-                    FailureKind::NoAgreement,
-                    format!(
-                        "plane {k} of the {which} cloud does not land on its partner in the \
-                         {other} cloud: of its {overlap} inliers that land near {other} points, \
-                         {:.0} % land nearest to inliers of the matched plane (< {:.0} %); the two \
-                         are likely different surfaces, parallel and close (a pavement or kerb \
-                         taken for the ground, a box top)",
-                        100.0 * share,
-                        100.0 * MIN_PLANE_AGREEMENT
-                    ),
-                ));
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Calibrates `reference_from_target` from a wall corner seen by both sensors (see the module docs).
-///
-/// Errors: [`Error::InvalidInput`] for malformed input; [`Error::Calibration`] when three planes
-/// with enough inliers are not found in a cloud, the planes are not linearly independent, the
-/// correspondence is ambiguous without a tie-break, or the refined planes do not agree.
-pub fn calibrate_planes(
+/// `Err(InvalidInput)` for a malformed cloud ([`check_cloud`]), loss or distance threshold.
+fn validate(
     reference: &[Point3<f64>],
     target: &[Point3<f64>],
     options: &PlanarOptions,
-) -> Result<PlanarCalibration> {
+) -> Result<()> {
     check_cloud(reference, "reference")?;
     check_cloud(target, "target")?;
     if let Some(loss) = options.loss {
@@ -628,10 +330,17 @@ pub fn calibrate_planes(
             )));
         }
     }
-    let deadline = Deadline::new(options.time_budget);
-    let mut clock = Stopwatch::start();
+    Ok(())
+}
 
-    // Threshold and planes of each cloud; the two clouds are independent, so they run side by side.
+/// The inlier threshold and the three planes (right-handed) of each cloud, `[reference, target]`;
+/// the two clouds are independent, so they run side by side.
+fn extract_both(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    options: &PlanarOptions,
+    deadline: &Deadline,
+) -> Result<([f64; 2], [Vec<ExtractedPlane>; 2])> {
     let per_cloud = |points: &[Point3<f64>], which: &str| -> Result<(f64, Vec<ExtractedPlane>)> {
         let threshold = match options.distance_threshold {
             Some(t) => t,
@@ -640,7 +349,7 @@ pub fn calibrate_planes(
         let mut o = ExtractOptions::new(3, threshold);
         o.min_inliers = options.min_inliers;
         o.ransac.seed = options.seed;
-        o.ransac.deadline = Some(deadline);
+        o.ransac.deadline = Some(*deadline);
         o.min_angle_between = Some(MIN_PLANE_ANGLE);
         let planes = extract_planes(points, &o).map_err(|e| with_cloud(e, which))?;
         Ok((threshold, right_handed(planes)))
@@ -651,121 +360,59 @@ pub fn calibrate_planes(
     );
     let (threshold_ref, found_ref) = ref_result?;
     let (threshold_tgt, found_tgt) = tgt_result?;
-    let thresholds = [threshold_ref, threshold_tgt];
+    Ok(([threshold_ref, threshold_tgt], [found_ref, found_tgt]))
+}
+
+/// Calibrates `reference_from_target` from a wall corner seen by both sensors (see the module docs).
+///
+/// Errors: [`Error::InvalidInput`] for malformed input; [`Error::Calibration`] when three planes
+/// with enough inliers are not found in a cloud, the planes are not linearly independent, the
+/// correspondence is ambiguous without a tie-break, or the refined planes do not agree.
+pub fn calibrate_planes(
+    reference: &[Point3<f64>],
+    target: &[Point3<f64>],
+    options: &PlanarOptions,
+) -> Result<PlanarCalibration> {
+    validate(reference, target, options)?;
+    let deadline = Deadline::new(options.time_budget);
+    let mut clock = Stopwatch::start();
+
+    // Threshold and planes of each cloud.
+    let (thresholds, [found_ref, found_tgt]) = extract_both(reference, target, options, &deadline)?;
     clock.lap("planes");
     deadline.check("plane extraction")?;
 
-    for (points, found, which) in [
-        (reference, &found_ref, "reference"),
-        (target, &found_tgt, "target"),
-    ] {
-        check_widths(points, found, options.min_plane_width, which)?;
-    }
-    let planes_ref = to_array(&found_ref.iter().map(|p| p.plane).collect::<Vec<_>>())?;
-    let planes_tgt_rh = to_array(&found_tgt.iter().map(|p| p.plane).collect::<Vec<_>>())?;
-    check_conditioning(&planes_ref, "reference")?;
-    check_conditioning(&planes_tgt_rh, "target")?;
-    let (ordering, rotation) = match_planes(&planes_ref, &planes_tgt_rh, options.up)?;
-    let k = ordering.chosen;
-    let matched_tgt: Vec<&ExtractedPlane> = (0..3).map(|i| &found_tgt[(i + k) % 3]).collect();
-    let planes_tgt = [
-        matched_tgt[0].plane,
-        matched_tgt[1].plane,
-        matched_tgt[2].plane,
-    ];
+    // The planes checked and matched (ordering of the target's by Kabsch on the normals).
+    let matched = match_found(reference, target, &found_ref, &found_tgt, options)?;
     clock.lap("match");
 
-    let corner_ref = corner(&planes_ref)?;
-    let corner_tgt = corner(&planes_tgt)?;
-    let initial = isometry(&rotation, corner_ref.coords - rotation * corner_tgt.coords);
+    // The closed-form initial pose from the corners.
+    let (corners, initial) = closed_form(&matched)?;
     clock.lap("closed_form");
 
-    let inliers_ref: [Vec<usize>; 3] = to_array(
-        &found_ref
-            .iter()
-            .map(|p| p.inliers.clone())
-            .collect::<Vec<_>>(),
-    )?;
-    let inliers_tgt: [Vec<usize>; 3] = to_array(
-        &matched_tgt
-            .iter()
-            .map(|p| p.inliers.clone())
-            .collect::<Vec<_>>(),
-    )?;
-    let select = |points: &[Point3<f64>], idx: &[usize]| -> Vec<Point3<f64>> {
-        idx.iter().filter_map(|&i| points.get(i).copied()).collect()
+    // LM (and the robust refinement) on the matched planes' inliers.
+    let (inliers_ref, inliers_tgt) = matched_inliers(&found_ref, &matched.matched_tgt)?;
+    let pairs = PlanePairs {
+        reference,
+        target,
+        planes_ref: &matched.planes_ref,
+        planes_tgt: &matched.planes_tgt,
+        inliers_ref: &inliers_ref,
+        inliers_tgt: &inliers_tgt,
     };
-    let mut moment_groups = Vec::with_capacity(6);
-    for i in 0..3 {
-        moment_groups.push(PlaneMomentGroup {
-            plane: planes_ref[i],
-            moments: Moments::from_points(&select(target, &inliers_tgt[i])),
-            frame: Frame::Target,
-        });
-        moment_groups.push(PlaneMomentGroup {
-            plane: planes_tgt[i],
-            moments: Moments::from_points(&select(reference, &inliers_ref[i])),
-            frame: Frame::Reference,
-        });
-    }
-    let moments_problem = PlaneMomentsProblem::new(moment_groups)?;
-
-    let loss = options.loss.unwrap_or(Loss::Cauchy {
-        scale: DEFAULT_CAUCHY_SCALE * thresholds[0].max(thresholds[1]),
-    });
-    let (pose, report) = if options.refine {
-        // The exact least-squares solution on the sufficient statistics costs microseconds; a
-        // robust loss then starts from it and needs only a few passes over the points.
-        let least_squares = solve(&moments_problem, &initial, &options.lm)?;
-        let solution = match loss {
-            Loss::Squared => least_squares,
-            loss => {
-                let mut groups = Vec::with_capacity(6);
-                for i in 0..3 {
-                    groups.push(PlaneGroup {
-                        plane: planes_ref[i],
-                        points: select(target, &inliers_tgt[i]),
-                        frame: Frame::Target,
-                    });
-                    groups.push(PlaneGroup {
-                        plane: planes_tgt[i],
-                        points: select(reference, &inliers_ref[i]),
-                        frame: Frame::Reference,
-                    });
-                }
-                irls(
-                    &PointToPlane::new(groups, loss)?,
-                    &least_squares,
-                    &options.lm,
-                    &deadline,
-                )?
-            }
-        };
-        (solution.pose, Some(solution.report))
-    } else {
-        (initial, None)
-    };
+    let moments_problem = moments_problem(&pairs)?;
+    let (pose, report) = refine(
+        &pairs,
+        &moments_problem,
+        &initial,
+        thresholds,
+        options,
+        &deadline,
+    )?;
     clock.lap("refine");
 
     // Per-plane RMS over both directions, and the agreement check.
-    let group_rms = moments_problem.group_rms(&pose);
-    let mut rmse = [0.0; 3];
-    for i in 0..3 {
-        let (n_t, n_r) = (inliers_tgt[i].len() as f64, inliers_ref[i].len() as f64);
-        let (a, b) = (group_rms[2 * i], group_rms[2 * i + 1]);
-        rmse[i] = ((a * a * n_t + b * b * n_r) / (n_t + n_r)).sqrt();
-        let limit = 2.0 * thresholds[0].max(thresholds[1]);
-        if options.refine && rmse[i] > limit {
-            return Err(Error::calibration(
-                FailureKind::NoAgreement,
-                format!(
-                "the matched planes do not agree after refinement: plane {i} has an RMS residual \
-                 of {:.3} m (> {limit:.3} m); the two clouds may not show the same corner",
-                rmse[i]
-            ),
-            ));
-        }
-    }
+    let rmse = plane_rmse(&pairs, &moments_problem, &pose, thresholds, options)?;
     let covariance = report.as_ref().and_then(|r| r.covariance());
     clock.lap("check");
     planes_land_on_planes(
@@ -778,6 +425,12 @@ pub fn calibrate_planes(
     let check = certify(reference, target, &pose, &options.check)?;
     clock.lap("certify");
 
+    let Matched {
+        planes_ref,
+        planes_tgt,
+        ordering,
+        ..
+    } = matched;
     Ok(PlanarCalibration {
         check,
         reference_from_target: pose,
@@ -786,7 +439,7 @@ pub fn calibrate_planes(
         planes_target: planes_tgt,
         inliers_reference: inliers_ref,
         inliers_target: inliers_tgt,
-        corners: [corner_ref, corner_tgt],
+        corners,
         rmse,
         ordering,
         distance_thresholds: thresholds,
@@ -798,7 +451,12 @@ pub fn calibrate_planes(
 
 #[cfg(test)]
 mod tests {
+    use super::matching::check_conditioning;
+    use super::refine::irls;
     use super::*;
+    use crate::geometry::se3_log;
+    use crate::lm::solve;
+    use crate::residuals::{Frame, PlaneGroup, PointToPlane};
 
     #[test]
     fn a_cloud_far_from_its_origin_is_refused() {

@@ -1,0 +1,184 @@
+//! Step 7 of the pipeline: the refinement, least squares on the matched planes' sufficient
+//! statistics, then a robust loss by iteratively reweighted least squares.
+
+use nalgebra::{Isometry3, Point3};
+
+use super::matching::to_array;
+use super::{
+    PlanarOptions, DEFAULT_CAUCHY_SCALE, IRLS_MAX_ROUNDS, IRLS_RELATIVE_STEP, IRLS_STEP_TOLERANCE,
+};
+use crate::budget::Deadline;
+use crate::error::Result;
+use crate::fit::Moments;
+use crate::geometry::{se3_log, Plane};
+use crate::lm::{solve, LeastSquaresProblem, LmOptions, LmReport, LmSolution, Loss, Termination};
+use crate::ransac::plane::ExtractedPlane;
+use crate::residuals::{Frame, PlaneGroup, PlaneMomentGroup, PlaneMomentsProblem, PointToPlane};
+
+/// Robust refinement by iteratively reweighted least squares on weighted sufficient statistics:
+/// each round weights the points by `rho'(r^2)` at the current pose (one pass) and solves that
+/// weighted problem exactly on its moments. The fixed point is a stationary point of the robust
+/// cost, the same estimate a robust Levenberg–Marquardt reaches, at a fraction of the passes
+/// over the points. The report is the last round's, with the robust cost at the start and end.
+pub(super) fn irls(
+    problem: &PointToPlane,
+    start: &LmSolution,
+    lm: &LmOptions,
+    deadline: &Deadline,
+) -> Result<LmSolution> {
+    let smallest_sd = start
+        .report
+        .covariance()
+        .map(|c| {
+            c.diagonal()
+                .iter()
+                .fold(f64::INFINITY, |m, &v| m.min(v.max(0.0).sqrt()))
+        })
+        .filter(|sd| sd.is_finite())
+        .unwrap_or(0.0);
+    let tolerance = (IRLS_RELATIVE_STEP * smallest_sd).max(IRLS_STEP_TOLERANCE);
+    let mut solution = *start;
+    let mut iterations = start.report.iterations;
+    let mut converged = false;
+    for _ in 0..IRLS_MAX_ROUNDS {
+        deadline.check("the robust refinement")?;
+        let weighted = problem.reweighted(&solution.pose)?;
+        let next = solve(&weighted, &solution.pose, lm)?;
+        iterations += next.report.iterations;
+        let step = se3_log(&(next.pose * solution.pose.inverse())).norm();
+        solution = next;
+        if step < tolerance {
+            converged = true;
+            break;
+        }
+    }
+    solution.report.iterations = iterations;
+    solution.report.initial_cost = problem.normal_equations(&start.pose, false).cost;
+    solution.report.final_cost = problem.normal_equations(&solution.pose, false).cost;
+    if !converged {
+        solution.report.termination = Termination::MaxIterations;
+    }
+    Ok(solution)
+}
+
+/// The inlier indices of three planes.
+pub(super) type Inliers = [Vec<usize>; 3];
+
+/// The inliers of the reference's planes and of the target's in matched order.
+pub(super) fn matched_inliers(
+    found_ref: &[ExtractedPlane],
+    matched_tgt: &[&ExtractedPlane],
+) -> Result<(Inliers, Inliers)> {
+    let inliers_ref: [Vec<usize>; 3] = to_array(
+        &found_ref
+            .iter()
+            .map(|p| p.inliers.clone())
+            .collect::<Vec<_>>(),
+    )?;
+    let inliers_tgt: [Vec<usize>; 3] = to_array(
+        &matched_tgt
+            .iter()
+            .map(|p| p.inliers.clone())
+            .collect::<Vec<_>>(),
+    )?;
+    Ok((inliers_ref, inliers_tgt))
+}
+
+/// The points of `points` at the indices `idx`.
+pub(super) fn select(points: &[Point3<f64>], idx: &[usize]) -> Vec<Point3<f64>> {
+    idx.iter().filter_map(|&i| points.get(i).copied()).collect()
+}
+
+/// The matched planes and their inliers: the target's inliers on each reference plane and the
+/// reference's on each target plane.
+pub(super) struct PlanePairs<'a> {
+    pub(super) reference: &'a [Point3<f64>],
+    pub(super) target: &'a [Point3<f64>],
+    pub(super) planes_ref: &'a [Plane; 3],
+    pub(super) planes_tgt: &'a [Plane; 3],
+    pub(super) inliers_ref: &'a [Vec<usize>; 3],
+    pub(super) inliers_tgt: &'a [Vec<usize>; 3],
+}
+
+/// The least-squares problem on the sufficient statistics (moments) of the plane pairs.
+pub(super) fn moments_problem(pairs: &PlanePairs<'_>) -> Result<PlaneMomentsProblem> {
+    let PlanePairs {
+        reference,
+        target,
+        planes_ref,
+        planes_tgt,
+        inliers_ref,
+        inliers_tgt,
+    } = *pairs;
+    let mut moment_groups = Vec::with_capacity(6);
+    for i in 0..3 {
+        moment_groups.push(PlaneMomentGroup {
+            plane: planes_ref[i],
+            moments: Moments::from_points(&select(target, &inliers_tgt[i])),
+            frame: Frame::Target,
+        });
+        moment_groups.push(PlaneMomentGroup {
+            plane: planes_tgt[i],
+            moments: Moments::from_points(&select(reference, &inliers_ref[i])),
+            frame: Frame::Reference,
+        });
+    }
+    PlaneMomentsProblem::new(moment_groups)
+}
+
+/// The refined pose and its report (LM on the moments, then IRLS under a robust loss), or the
+/// closed-form pose `initial` unrefined when [`PlanarOptions::refine`] is off.
+pub(super) fn refine(
+    pairs: &PlanePairs<'_>,
+    moments_problem: &PlaneMomentsProblem,
+    initial: &Isometry3<f64>,
+    thresholds: [f64; 2],
+    options: &PlanarOptions,
+    deadline: &Deadline,
+) -> Result<(Isometry3<f64>, Option<LmReport>)> {
+    let PlanePairs {
+        reference,
+        target,
+        planes_ref,
+        planes_tgt,
+        inliers_ref,
+        inliers_tgt,
+    } = *pairs;
+    let initial = *initial;
+    let loss = options.loss.unwrap_or(Loss::Cauchy {
+        scale: DEFAULT_CAUCHY_SCALE * thresholds[0].max(thresholds[1]),
+    });
+    let (pose, report) = if options.refine {
+        // The exact least-squares solution on the sufficient statistics costs microseconds; a
+        // robust loss then starts from it and needs only a few passes over the points.
+        let least_squares = solve(moments_problem, &initial, &options.lm)?;
+        let solution = match loss {
+            Loss::Squared => least_squares,
+            loss => {
+                let mut groups = Vec::with_capacity(6);
+                for i in 0..3 {
+                    groups.push(PlaneGroup {
+                        plane: planes_ref[i],
+                        points: select(target, &inliers_tgt[i]),
+                        frame: Frame::Target,
+                    });
+                    groups.push(PlaneGroup {
+                        plane: planes_tgt[i],
+                        points: select(reference, &inliers_ref[i]),
+                        frame: Frame::Reference,
+                    });
+                }
+                irls(
+                    &PointToPlane::new(groups, loss)?,
+                    &least_squares,
+                    &options.lm,
+                    deadline,
+                )?
+            }
+        };
+        (solution.pose, Some(solution.report))
+    } else {
+        (initial, None)
+    };
+    Ok((pose, report))
+}

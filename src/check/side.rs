@@ -1,0 +1,62 @@
+//! One cloud of a [`PreparedPair`](super::PreparedPair): downsampled, indexed and binned.
+
+use nalgebra::Point3;
+
+use super::{CheckOptions, THICKNESS_SAMPLES};
+use crate::error::Result;
+use crate::icp::{voxel_downsample, SurfaceCloud};
+use crate::visibility::RangeImage;
+
+/// One cloud, downsampled and indexed, with its sensor's range image.
+#[derive(Debug)]
+pub(super) struct Side {
+    pub(super) surface: SurfaceCloud,
+    pub(super) samples: Vec<Point3<f64>>,
+    pub(super) image: RangeImage,
+}
+
+impl Side {
+    /// The median local thickness of the sampled points that lie on a surface (metres; 0 when
+    /// none does).
+    pub(super) fn thickness(&self) -> f64 {
+        let mut values: Vec<f64> = (0..self.surface.points().len())
+            .step_by(
+                self.surface
+                    .points()
+                    .len()
+                    .div_ceil(THICKNESS_SAMPLES)
+                    .max(1),
+            )
+            .filter_map(|i| self.surface.thickness(i))
+            .collect();
+        median(&mut values)
+    }
+
+    pub(super) fn new(points: &[Point3<f64>], options: &CheckOptions) -> Result<Self> {
+        let (indexed, image) = crate::join(
+            || -> Result<_> {
+                let (voxels, _) = voxel_downsample(points, options.voxel_size)?;
+                let stride = voxels.len().div_ceil(options.samples).max(1);
+                let samples = voxels.iter().step_by(stride).copied().collect();
+                Ok((SurfaceCloud::new(voxels)?, samples))
+            },
+            || RangeImage::new(points, options.visibility_resolution),
+        );
+        let ((surface, samples), image) = (indexed?, image?);
+        Ok(Side {
+            surface,
+            samples,
+            image,
+        })
+    }
+}
+
+/// The median of `values` (0 for none).
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    let (_, m, _) = values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    *m
+}
