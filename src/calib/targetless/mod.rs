@@ -237,13 +237,8 @@ pub fn calibrate_targetless(
     let pool = verify_hypotheses(&verifier, &chosen);
     let contenders = || pool.iter().map(|(_, v)| *v);
     let within = |v: &Verified| v.pose.translation.vector.norm() <= options.max_translation;
-    let Some((winner, top, runner_up)) = settle_best(&pool, &within, &|v| verifier.polish(v))
-    else {
-        return Err(Error::calibration(
-            FailureKind::NoAgreement,
-            "no plane hypothesis brings the clouds into agreement (ICP found no overlap)",
-        ));
-    };
+    let settled = settle_best(&pool, &within, &|v| verifier.polish(v));
+    let (winner, top, runner_up) = settled.ok_or_else(no_overlap)?;
     let checks = LazyCheck::new(reference, target, &options.check);
     ensure_best_acceptable(&top, runner_up.filter(within), &checks, options)?;
     let contest = Contest::new(
@@ -282,11 +277,8 @@ pub fn calibrate_targetless(
     clock.lap("icp");
 
     // Step 6: observability, range and the last refusals; the check certifies the result.
-    let matched: Vec<&PlaneFeature> = refined
-        .matches
-        .iter()
-        .map(|&(i, _)| &reference_ds.features[i])
-        .collect();
+    let matched = |&(i, _): &(usize, usize)| &reference_ds.features[i];
+    let matched: Vec<&PlaneFeature> = refined.matches.iter().map(matched).collect();
     let observed = observability(&matched, icp.as_ref(), refined.report.as_ref(), options)?;
     ensure_settled(&pose, icp.as_ref(), ambiguity, options)?;
     let check = checks.pair()?.certify(&pose)?;
@@ -304,11 +296,7 @@ pub fn calibrate_targetless(
         agreement: top.agreement,
         violations: top.violations,
         ambiguous: rivalry.ambiguous,
-        covariance: match (&icp, &refined.report) {
-            (Some(r), _) => r.covariance,
-            (None, Some(rep)) => rep.covariance(),
-            _ => None,
-        },
+        covariance: covariance(icp.as_ref(), refined.report.as_ref()),
         icp,
         weakest_translation: observed.weakest_translation,
         weakest_rotation: observed.weakest_rotation,
@@ -347,6 +335,23 @@ fn plane_hypotheses(
         return Err(no_matching_pair(reference, target, options));
     }
     Ok((enumerated, candidates, sweep))
+}
+
+/// The covariance of the result: the final ICP's when it ran, else the plane refinement's.
+fn covariance(icp: Option<&IcpResult>, report: Option<&LmReport>) -> Option<Matrix6<f64>> {
+    match (icp, report) {
+        (Some(r), _) => r.covariance,
+        (None, Some(rep)) => rep.covariance(),
+        _ => None,
+    }
+}
+
+/// No verified pose at all.
+fn no_overlap() -> Error {
+    Error::calibration(
+        FailureKind::NoAgreement,
+        "no plane hypothesis brings the clouds into agreement (ICP found no overlap)",
+    )
 }
 
 /// `Err(Calibration)` when a cloud shows too few planes for the method (one for the ground sweep,
