@@ -1,6 +1,6 @@
 //! A building corner (two walls and the ground) scanned by two spinning LiDARs.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -72,6 +72,59 @@ pub const MAX_EXTRA_WALLS: usize = 2;
 /// heading and a tilt under `target_tilt_deg`. The true planes are wall 1, wall 2, the ground,
 /// then any extra walls.
 pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene> {
+    validate_corner(options)?;
+    let angle = options.wall_angle_deg;
+    let (sin_a, cos_a) = angle.to_radians().sin_cos();
+    let wall2 = Vector3::new(cos_a, sin_a, 0.0);
+    let bisector = Vector3::new(
+        (angle * 0.5).to_radians().cos(),
+        (angle * 0.5).to_radians().sin(),
+        0.0,
+    );
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    let rectangles = corner_walls(&wall2, options.extra_walls)?;
+    let sensors = place_sensors(&mut rng, &bisector, options);
+    let mut shapes: Vec<Shape> = rectangles
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let intensity = if i == 2 {
+                IntensityRange::GROUND
+            } else {
+                IntensityRange::WALL
+            };
+            Shape::rectangle(*r, intensity)
+        })
+        .collect();
+    add_clutter_boxes(&mut rng, &mut shapes, &sensors, options)?;
+    let CornerSensors {
+        world_from_reference,
+        world_from_target,
+        ..
+    } = sensors;
+    let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
+    let (reference, target) = scan_pair(
+        model,
+        &shapes,
+        [&world_from_reference, &world_from_target],
+        scan_seeds,
+        options.range_noise,
+        options.dropout,
+    )?;
+    let planes: Vec<Plane> = rectangles.iter().map(|r| r.plane()).collect();
+    Ok(Scene {
+        reference,
+        target,
+        reference_from_target: world_from_reference.inverse() * world_from_target,
+        world_from_reference,
+        planes: reference_planes(&planes, &world_from_reference),
+        poles: Vec::new(),
+        shapes,
+    })
+}
+
+/// The `InvalidInput` checks of [`corner_scene`].
+fn validate_corner(options: &CornerOptions) -> Result<()> {
     crate::sim::check_dropout(options.dropout)?;
     if options.extra_walls > MAX_EXTRA_WALLS {
         return Err(Error::InvalidInput(format!(
@@ -100,14 +153,11 @@ pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene>
             "target_relative_yaw_deg must be finite".into(),
         ));
     }
-    let (sin_a, cos_a) = angle.to_radians().sin_cos();
-    let wall2 = Vector3::new(cos_a, sin_a, 0.0);
-    let bisector = Vector3::new(
-        (angle * 0.5).to_radians().cos(),
-        (angle * 0.5).to_radians().sin(),
-        0.0,
-    );
-    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    Ok(())
+}
+
+/// Wall 1, wall 2 (along `wall2`), the ground, then the extra walls (no random draws).
+fn corner_walls(wall2: &Vector3<f64>, extra_walls: usize) -> Result<Vec<Rectangle>> {
     let (l, h) = (CORNER_WALL_LENGTH, CORNER_WALL_HEIGHT);
     let mut rectangles = vec![
         Rectangle::new(Point3::origin(), Vector3::x() * l, Vector3::z() * h)?,
@@ -119,73 +169,96 @@ pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene>
         )?,
     ];
     let far = 16.0;
-    if options.extra_walls >= 1 {
+    if extra_walls >= 1 {
         rectangles.push(Rectangle::new(
             Point3::new(0.0, far, 0.0),
             Vector3::x() * l,
             Vector3::z() * h,
         )?);
     }
-    if options.extra_walls >= 2 {
+    if extra_walls >= 2 {
         rectangles.push(Rectangle::new(
             Point3::new(far, 0.0, 0.0),
             Vector3::y() * l,
             Vector3::z() * h,
         )?);
     }
+    Ok(rectangles)
+}
+
+/// The two sensors' poses in the world frame and their positions (kept clear of clutter).
+struct CornerSensors {
+    world_from_reference: Isometry3<f64>,
+    world_from_target: Isometry3<f64>,
+    reference_position: Vector3<f64>,
+    target_position: Vector3<f64>,
+}
+
+/// Draws the reference pose on the bisector, then the target pose near it.
+fn place_sensors(
+    rng: &mut ChaCha8Rng,
+    bisector: &Vector3<f64>,
+    options: &CornerOptions,
+) -> CornerSensors {
     let small_tilt = 3f64.to_radians();
-    let along = uniform(&mut rng, 4.0, 6.0) * std::f64::consts::SQRT_2;
-    let across = uniform(&mut rng, -1.0, 1.0);
+    let along = uniform(rng, 4.0, 6.0) * std::f64::consts::SQRT_2;
+    let across = uniform(rng, -1.0, 1.0);
     let reference_position = bisector * along
         + Vector3::new(-bisector.y, bisector.x, 0.0) * across
-        + Vector3::z() * uniform(&mut rng, 1.6, 2.0);
-    let reference_yaw = uniform(&mut rng, 0.0, std::f64::consts::TAU);
+        + Vector3::z() * uniform(rng, 1.6, 2.0);
+    let reference_yaw = uniform(rng, 0.0, std::f64::consts::TAU);
     let world_from_reference = pose(
         reference_position,
-        uniform(&mut rng, -small_tilt, small_tilt),
-        uniform(&mut rng, -small_tilt, small_tilt),
+        uniform(rng, -small_tilt, small_tilt),
+        uniform(rng, -small_tilt, small_tilt),
         reference_yaw,
     );
-    let tilt = tilt_deg.to_radians();
+    let tilt = options.target_tilt_deg.to_radians();
     let target_position = reference_position
         + Vector3::new(
-            uniform(&mut rng, -1.5, 1.5),
-            uniform(&mut rng, -1.5, 1.5),
-            uniform(&mut rng, -0.5, 0.5),
+            uniform(rng, -1.5, 1.5),
+            uniform(rng, -1.5, 1.5),
+            uniform(rng, -0.5, 0.5),
         );
-    let random_yaw = uniform(&mut rng, 0.0, std::f64::consts::TAU);
+    let random_yaw = uniform(rng, 0.0, std::f64::consts::TAU);
     let world_from_target = pose(
         target_position,
-        uniform(&mut rng, -tilt, tilt),
-        uniform(&mut rng, -tilt, tilt),
+        uniform(rng, -tilt, tilt),
+        uniform(rng, -tilt, tilt),
         options
             .target_relative_yaw_deg
             .map_or(random_yaw, |y| reference_yaw + y.to_radians()),
     );
-    let mut shapes: Vec<Shape> = rectangles
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let intensity = if i == 2 {
-                IntensityRange::GROUND
-            } else {
-                IntensityRange::WALL
-            };
-            Shape::rectangle(*r, intensity)
-        })
-        .collect();
+    CornerSensors {
+        world_from_reference,
+        world_from_target,
+        reference_position,
+        target_position,
+    }
+}
+
+/// Adds up to `clutter_boxes` boxes inside the wedge, clear of the walls and both sensors.
+fn add_clutter_boxes(
+    rng: &mut ChaCha8Rng,
+    shapes: &mut Vec<Shape>,
+    sensors: &CornerSensors,
+    options: &CornerOptions,
+) -> Result<()> {
+    let angle = options.wall_angle_deg;
+    let (reference_position, target_position) =
+        (sensors.reference_position, sensors.target_position);
     for _ in 0..options.clutter_boxes {
         for _ in 0..PLACEMENT_ATTEMPTS {
             let size = Vector3::new(
-                uniform(&mut rng, 0.5, 2.5),
-                uniform(&mut rng, 0.5, 2.5),
-                uniform(&mut rng, 0.5, 2.0),
+                uniform(rng, 0.5, 2.5),
+                uniform(rng, 0.5, 2.5),
+                uniform(rng, 0.5, 2.0),
             );
             // Inside the wedge between the walls, clear of both.
-            let radius = uniform(&mut rng, 2.5, 15.0);
-            let theta = uniform(&mut rng, 0.15, 0.85) * angle.to_radians();
+            let radius = uniform(rng, 2.5, 15.0);
+            let theta = uniform(rng, 0.15, 0.85) * angle.to_radians();
             let center = Vector3::new(radius * theta.cos(), radius * theta.sin(), size.z * 0.5);
-            let yaw = uniform(&mut rng, 0.0, std::f64::consts::PI);
+            let yaw = uniform(rng, 0.0, std::f64::consts::PI);
             let clear = [reference_position, target_position]
                 .iter()
                 .all(|s| (s.xy() - center.xy()).norm() > SENSOR_CLEARANCE + 0.5 * size.xy().norm());
@@ -196,23 +269,5 @@ pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene>
             }
         }
     }
-    let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
-    let (reference, target) = scan_pair(
-        model,
-        &shapes,
-        [&world_from_reference, &world_from_target],
-        scan_seeds,
-        options.range_noise,
-        options.dropout,
-    )?;
-    let planes: Vec<Plane> = rectangles.iter().map(|r| r.plane()).collect();
-    Ok(Scene {
-        reference,
-        target,
-        reference_from_target: world_from_reference.inverse() * world_from_target,
-        world_from_reference,
-        planes: reference_planes(&planes, &world_from_reference),
-        poles: Vec::new(),
-        shapes,
-    })
+    Ok(())
 }
