@@ -1,6 +1,6 @@
 //! A street (targetless plane matching) and a corridor (its unobservable case).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -8,7 +8,7 @@ use super::{pose, reference_planes, scan_pair, uniform, Pole, Scene, POLE_PAINT}
 use crate::error::{Error, Result};
 use crate::geometry::Plane;
 use crate::sim::shapes::{Cuboid, Cylinder, IntensityRange, Rectangle, Shape};
-use crate::sim::{scan, BeamModel, ScanOptions};
+use crate::sim::{scan, BeamModel, Scan, ScanOptions};
 
 /// Half width of the simulated road between the kerbs, metres.
 pub const STREET_HALF_WIDTH: f64 = 4.0;
@@ -80,6 +80,46 @@ impl Default for StreetOptions {
 /// With `clutter`, parked cars (boxes), tree trunks and poles (cylinders) line the kerbs. The
 /// true planes are the road, then the facade segments.
 pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
+    validate_street(options)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    let (rectangles, mut boxes) = street_layout(&mut rng, options.cross_wall)?;
+    let cylinders = if options.clutter {
+        kerb_clutter(&mut rng, &mut boxes)?
+    } else {
+        Vec::new()
+    };
+    let (world_from_reference, reference_from_target) = mount_sensors(&mut rng, options);
+    let world_from_target = world_from_reference * reference_from_target;
+    let shapes = street_shapes(&rectangles, &boxes, &cylinders);
+    let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
+    let (reference, target) = scan_street(
+        &shapes,
+        [&world_from_reference, &world_from_target],
+        scan_seeds,
+        options.range_noise,
+    )?;
+    let planes: Vec<Plane> = rectangles.iter().map(|r| r.plane()).collect();
+    let reference_from_world = world_from_reference.inverse();
+    Ok(Scene {
+        reference,
+        target,
+        reference_from_target,
+        world_from_reference,
+        planes: reference_planes(&planes, &world_from_reference),
+        poles: cylinders
+            .iter()
+            .map(|c| Pole {
+                axis: c.axis().transformed(&reference_from_world),
+                radius: c.radius(),
+                length: c.length(),
+            })
+            .collect(),
+        shapes,
+    })
+}
+
+/// The `InvalidInput` checks of [`street_scene`].
+fn validate_street(options: &StreetOptions) -> Result<()> {
     if !(options.target_tilt_deg.is_finite() && (0.0..=80.0).contains(&options.target_tilt_deg)) {
         return Err(Error::InvalidInput(format!(
             "target_tilt_deg must be in [0, 80], got {}",
@@ -92,7 +132,12 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
             options.target_offset
         )));
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    Ok(())
+}
+
+/// The road, the facades (drawn) and the optional cross wall as rectangles (road first), and the
+/// pavements as boxes.
+fn street_layout(rng: &mut ChaCha8Rng, cross_wall: bool) -> Result<(Vec<Rectangle>, Vec<Cuboid>)> {
     let half = 0.5 * STREET_LENGTH;
     let mut rectangles = vec![Rectangle::new(
         Point3::new(-half, -STREET_FACADE_DISTANCE - 1.0, 0.0),
@@ -117,72 +162,84 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
     for sign in [-1.0, 1.0] {
         let mut x = -half;
         while x < half {
-            let width = uniform(&mut rng, 8.0, 25.0).min(half - x);
-            let height = uniform(&mut rng, 6.0, 15.0);
-            let y = sign * (STREET_FACADE_DISTANCE + uniform(&mut rng, 0.0, 0.4));
+            let width = uniform(rng, 8.0, 25.0).min(half - x);
+            let height = uniform(rng, 6.0, 15.0);
+            let y = sign * (STREET_FACADE_DISTANCE + uniform(rng, 0.0, 0.4));
             rectangles.push(Rectangle::new(
                 Point3::new(x, y, 0.0),
                 Vector3::x() * width,
                 Vector3::z() * height,
             )?);
-            x += width + uniform(&mut rng, 1.0, 4.0);
+            x += width + uniform(rng, 1.0, 4.0);
         }
     }
-    if options.cross_wall {
+    if cross_wall {
         rectangles.push(Rectangle::new(
             Point3::new(30.0, -STREET_FACADE_DISTANCE, 0.0),
             Vector3::y() * (2.0 * STREET_FACADE_DISTANCE),
             Vector3::z() * 8.0,
         )?);
     }
+    Ok((rectangles, boxes))
+}
+
+/// Parked cars (pushed onto `boxes`), tree trunks and poles (returned) along both kerbs.
+fn kerb_clutter(rng: &mut ChaCha8Rng, boxes: &mut Vec<Cuboid>) -> Result<Vec<Cylinder>> {
+    let half = 0.5 * STREET_LENGTH;
     let mut cylinders = Vec::new();
-    if options.clutter {
-        for sign in [-1.0, 1.0] {
-            let mut x = -half + uniform(&mut rng, 0.0, 8.0);
-            while x < half - 5.0 {
-                let kind: f64 = rng.random();
-                let y = sign * (STREET_HALF_WIDTH + 0.6);
-                if kind < 0.4 {
-                    let size = Vector3::new(
-                        uniform(&mut rng, 3.8, 4.8),
-                        uniform(&mut rng, 1.7, 1.9),
-                        uniform(&mut rng, 1.4, 1.7),
-                    );
-                    let center = Vector3::new(x, sign * (STREET_HALF_WIDTH - 1.1), 0.5 * size.z);
-                    let yaw = uniform(&mut rng, -0.05, 0.05);
-                    boxes.push(Cuboid::new(pose(center, 0.0, 0.0, yaw), size)?);
-                    x += size.x + uniform(&mut rng, 1.0, 8.0);
-                } else if kind < 0.8 {
-                    let radius = uniform(&mut rng, 0.12, 0.3);
-                    let trunk = Cylinder::new(
-                        Point3::new(x, y, 0.0),
-                        Vector3::z(),
-                        uniform(&mut rng, 2.5, 4.0),
-                        radius,
-                    )?;
-                    cylinders.push(trunk);
-                    x += uniform(&mut rng, 4.0, 10.0);
-                } else {
-                    let post = Cylinder::new(
-                        Point3::new(x, y, 0.0),
-                        Vector3::z(),
-                        uniform(&mut rng, 3.0, 6.0),
-                        uniform(&mut rng, 0.05, 0.1),
-                    )?;
-                    cylinders.push(post);
-                    x += uniform(&mut rng, 4.0, 10.0);
-                }
+    for sign in [-1.0, 1.0] {
+        let mut x = -half + uniform(rng, 0.0, 8.0);
+        while x < half - 5.0 {
+            let kind: f64 = rng.random();
+            let y = sign * (STREET_HALF_WIDTH + 0.6);
+            if kind < 0.4 {
+                let size = Vector3::new(
+                    uniform(rng, 3.8, 4.8),
+                    uniform(rng, 1.7, 1.9),
+                    uniform(rng, 1.4, 1.7),
+                );
+                let center = Vector3::new(x, sign * (STREET_HALF_WIDTH - 1.1), 0.5 * size.z);
+                let yaw = uniform(rng, -0.05, 0.05);
+                boxes.push(Cuboid::new(pose(center, 0.0, 0.0, yaw), size)?);
+                x += size.x + uniform(rng, 1.0, 8.0);
+            } else if kind < 0.8 {
+                let radius = uniform(rng, 0.12, 0.3);
+                let trunk = Cylinder::new(
+                    Point3::new(x, y, 0.0),
+                    Vector3::z(),
+                    uniform(rng, 2.5, 4.0),
+                    radius,
+                )?;
+                cylinders.push(trunk);
+                x += uniform(rng, 4.0, 10.0);
+            } else {
+                let post = Cylinder::new(
+                    Point3::new(x, y, 0.0),
+                    Vector3::z(),
+                    uniform(rng, 3.0, 6.0),
+                    uniform(rng, 0.05, 0.1),
+                )?;
+                cylinders.push(post);
+                x += uniform(rng, 4.0, 10.0);
             }
         }
     }
+    Ok(cylinders)
+}
+
+/// Draws `world_from_reference` (the roof unit) and `reference_from_target` (the side unit).
+fn mount_sensors(
+    rng: &mut ChaCha8Rng,
+    options: &StreetOptions,
+) -> (Isometry3<f64>, Isometry3<f64>) {
     // The vehicle drives along +x in the right lane; the roof unit is the reference.
     let small = 1f64.to_radians();
-    let vehicle_y = -0.5 * STREET_HALF_WIDTH + uniform(&mut rng, -0.5, 0.5);
+    let vehicle_y = -0.5 * STREET_HALF_WIDTH + uniform(rng, -0.5, 0.5);
     let world_from_reference = pose(
-        Vector3::new(uniform(&mut rng, -2.0, 2.0), vehicle_y, 2.0),
-        uniform(&mut rng, -small, small),
-        uniform(&mut rng, -small, small),
-        uniform(&mut rng, -2.0 * small, 2.0 * small),
+        Vector3::new(uniform(rng, -2.0, 2.0), vehicle_y, 2.0),
+        uniform(rng, -small, small),
+        uniform(rng, -small, small),
+        uniform(rng, -2.0 * small, 2.0 * small),
     );
     let (side_sign, yaw) = match options.side {
         Side::Left => (1.0, std::f64::consts::FRAC_PI_2),
@@ -191,15 +248,19 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
     let mount_error = 3f64.to_radians();
     let reference_from_target = pose(
         Vector3::new(
-            uniform(&mut rng, -0.2, 0.2) + options.target_offset,
-            side_sign * uniform(&mut rng, 0.45, 0.65),
-            -uniform(&mut rng, 0.3, 0.5),
+            uniform(rng, -0.2, 0.2) + options.target_offset,
+            side_sign * uniform(rng, 0.45, 0.65),
+            -uniform(rng, 0.3, 0.5),
         ),
-        uniform(&mut rng, -mount_error, mount_error),
-        options.target_tilt_deg.to_radians() + uniform(&mut rng, -mount_error, mount_error),
-        yaw + uniform(&mut rng, -mount_error, mount_error),
+        uniform(rng, -mount_error, mount_error),
+        options.target_tilt_deg.to_radians() + uniform(rng, -mount_error, mount_error),
+        yaw + uniform(rng, -mount_error, mount_error),
     );
-    let world_from_target = world_from_reference * reference_from_target;
+    (world_from_reference, reference_from_target)
+}
+
+/// The shapes in scan order: rectangles (the road ground-bright, the rest walls), boxes, poles.
+fn street_shapes(rectangles: &[Rectangle], boxes: &[Cuboid], cylinders: &[Cylinder]) -> Vec<Shape> {
     let mut shapes: Vec<Shape> = rectangles
         .iter()
         .enumerate()
@@ -218,45 +279,37 @@ pub fn street_scene(options: &StreetOptions) -> Result<Scene> {
             .map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER)),
     );
     shapes.extend(cylinders.iter().map(|c| Shape::cylinder(*c, POLE_PAINT)));
-    let scan_seeds = (rng.random::<u64>(), rng.random::<u64>());
+    shapes
+}
+
+/// Scans the street with the roof HDL-64E (reference) and the wide-angle side unit (target).
+fn scan_street(
+    shapes: &[Shape],
+    world_from: [&Isometry3<f64>; 2],
+    scan_seeds: (u64, u64),
+    range_noise: Option<f64>,
+) -> Result<(Scan, Scan)> {
     let reference = scan(
         &BeamModel::preset(crate::sim::Preset::Hdl64e),
-        &shapes,
-        &world_from_reference,
+        shapes,
+        world_from[0],
         &ScanOptions {
             seed: scan_seeds.0,
-            range_noise: options.range_noise,
+            range_noise,
             dropout: 0.0,
         },
     )?;
     let target = scan(
         &wide_angle_model()?,
-        &shapes,
-        &world_from_target,
+        shapes,
+        world_from[1],
         &ScanOptions {
             seed: scan_seeds.1,
-            range_noise: options.range_noise,
+            range_noise,
             dropout: 0.0,
         },
     )?;
-    let planes: Vec<Plane> = rectangles.iter().map(|r| r.plane()).collect();
-    let reference_from_world = world_from_reference.inverse();
-    Ok(Scene {
-        reference,
-        target,
-        reference_from_target,
-        world_from_reference,
-        planes: reference_planes(&planes, &world_from_reference),
-        poles: cylinders
-            .iter()
-            .map(|c| Pole {
-                axis: c.axis().transformed(&reference_from_world),
-                radius: c.radius(),
-                length: c.length(),
-            })
-            .collect(),
-        shapes,
-    })
+    Ok((reference, target))
 }
 
 /// A corridor: a floor and two parallel walls 3 m apart along x, longer than the sensors'
