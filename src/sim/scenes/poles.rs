@@ -86,25 +86,7 @@ fn random_pole_axis(rng: &mut ChaCha8Rng) -> Vector3<f64> {
 /// optionally upside down). The true planes are the ground alone; the
 /// sign (when present) sits beside the poles, facing the sensors, with tape-bright intensity.
 pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
-    crate::sim::check_dropout(options.dropout)?;
-    if !(options.radius.is_finite() && options.radius > 0.0 && options.radius <= MAX_POLE_RADIUS) {
-        return Err(Error::InvalidInput(format!(
-            "pole radius must be in (0, {MAX_POLE_RADIUS}] metres, got {}",
-            options.radius
-        )));
-    }
-    if !(options.distance.is_finite() && options.distance >= 1.0 && options.distance <= 50.0) {
-        return Err(Error::InvalidInput(format!(
-            "pole distance must be in [1, 50] metres, got {}",
-            options.distance
-        )));
-    }
-    if !(options.max_tilt_deg.is_finite() && (0.0..=90.0).contains(&options.max_tilt_deg)) {
-        return Err(Error::InvalidInput(format!(
-            "max_tilt_deg must be in [0, 90], got {}",
-            options.max_tilt_deg
-        )));
-    }
+    validate_poles(options)?;
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let spacing = uniform(&mut rng, POLE_SPACING_RANGE.0, POLE_SPACING_RANGE.1);
     let a1 = random_pole_axis(&mut rng);
@@ -204,4 +186,28 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
         poles,
         shapes,
     })
+}
+
+/// The `InvalidInput` checks of [`poles_scene`].
+fn validate_poles(options: &PolesOptions) -> Result<()> {
+    crate::sim::check_dropout(options.dropout)?;
+    if !(options.radius.is_finite() && options.radius > 0.0 && options.radius <= MAX_POLE_RADIUS) {
+        return Err(Error::InvalidInput(format!(
+            "pole radius must be in (0, {MAX_POLE_RADIUS}] metres, got {}",
+            options.radius
+        )));
+    }
+    if !(options.distance.is_finite() && options.distance >= 1.0 && options.distance <= 50.0) {
+        return Err(Error::InvalidInput(format!(
+            "pole distance must be in [1, 50] metres, got {}",
+            options.distance
+        )));
+    }
+    if !(options.max_tilt_deg.is_finite() && (0.0..=90.0).contains(&options.max_tilt_deg)) {
+        return Err(Error::InvalidInput(format!(
+            "max_tilt_deg must be in [0, 90], got {}",
+            options.max_tilt_deg
+        )));
+    }
+    Ok(())
 }
