@@ -173,6 +173,40 @@ pub fn calibrate_rig(
     targets: &[(&str, Cloud<'_>)],
     options: &RigOptions,
 ) -> Result<RigCalibration> {
+    validate_inputs(targets, options)?;
+    // Node 0 is the reference, node i + 1 the target i.
+    let names: Vec<&str> = std::iter::once(REFERENCE)
+        .chain(targets.iter().map(|(n, _)| *n))
+        .collect();
+    let clouds: Vec<Cloud<'_>> = std::iter::once(reference)
+        .chain(targets.iter().map(|(_, c)| *c))
+        .collect();
+    let mut pairs = Pairs::new(&names);
+    pairs.calibrate_direct(&clouds, options)?;
+    if options.pairwise {
+        pairs.calibrate_target_pairs(&clouds, options)?;
+    }
+    let Pairs {
+        measured,
+        failures,
+        direct,
+        ..
+    } = pairs;
+    let poses = initial_poses(clouds.len(), &measured);
+    let unconnected = check_connected(&names, &poses, &failures, options)?;
+    let (edges, transforms, report) = refine(&names, &poses, measured, options)?;
+    Ok(RigCalibration {
+        transforms,
+        direct,
+        edges,
+        failures,
+        unconnected,
+        pose_graph: report,
+    })
+}
+
+/// The `InvalidInput` checks of [`calibrate_rig`], in its documented order.
+fn validate_inputs(targets: &[(&str, Cloud<'_>)], options: &RigOptions) -> Result<()> {
     if targets.is_empty() {
         return Err(Error::InvalidInput("targets is empty".into()));
     }
@@ -194,36 +228,56 @@ pub fn calibrate_rig(
             options.min_pair_overlap
         )));
     }
-    options.pose_graph.validate()?;
-    // Node 0 is the reference, node i + 1 the target i.
-    let names: Vec<&str> = std::iter::once(REFERENCE)
-        .chain(targets.iter().map(|(n, _)| *n))
-        .collect();
-    let clouds: Vec<Cloud<'_>> = std::iter::once(reference)
-        .chain(targets.iter().map(|(_, c)| *c))
-        .collect();
-    let mut measured: Vec<(usize, usize, Calibration)> = Vec::new();
-    let mut failures = Vec::new();
-    let mut fail = |a: usize, b: usize, kind: Option<FailureKind>, reason: String| {
-        failures.push(RigFailure {
-            a: names[a].to_string(),
-            b: names[b].to_string(),
+    options.pose_graph.validate()
+}
+
+/// The pairwise calibrations of a rig: the results kept as edges (node indices, 0 the reference),
+/// the pairs that gave none, and the direct results to the reference.
+struct Pairs<'n> {
+    names: &'n [&'n str],
+    measured: Vec<(usize, usize, Calibration)>,
+    failures: Vec<RigFailure>,
+    direct: Vec<(String, Isometry3<f64>)>,
+}
+
+impl<'n> Pairs<'n> {
+    fn new(names: &'n [&'n str]) -> Self {
+        Pairs {
+            names,
+            measured: Vec::new(),
+            failures: Vec::new(),
+            direct: Vec::new(),
+        }
+    }
+
+    fn fail(&mut self, a: usize, b: usize, kind: Option<FailureKind>, reason: String) {
+        self.failures.push(RigFailure {
+            a: self.names[a].to_string(),
+            b: self.names[b].to_string(),
             reason,
             kind,
         })
-    };
-    let mut direct = Vec::new();
-    for b in 1..clouds.len() {
-        match calibrate(clouds[0], clouds[b], options.method, &options.methods) {
-            Ok(c) => {
-                direct.push((names[b].to_string(), *c.reference_from_target()));
-                measured.push((0, b, c));
-            }
-            Err(Error::Calibration { kind, message }) => fail(0, b, Some(kind), message),
-            Err(e) => return Err(e),
-        }
     }
-    if options.pairwise {
+
+    /// Each target against the reference.
+    fn calibrate_direct(&mut self, clouds: &[Cloud<'_>], options: &RigOptions) -> Result<()> {
+        for b in 1..clouds.len() {
+            match calibrate(clouds[0], clouds[b], options.method, &options.methods) {
+                Ok(c) => {
+                    self.direct
+                        .push((self.names[b].to_string(), *c.reference_from_target()));
+                    self.measured.push((0, b, c));
+                }
+                Err(Error::Calibration { kind, message }) => self.fail(0, b, Some(kind), message),
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// Each pair of targets, kept when the result brings at least `min_pair_overlap` of one's
+    /// points onto the other.
+    fn calibrate_target_pairs(&mut self, clouds: &[Cloud<'_>], options: &RigOptions) -> Result<()> {
         for a in 1..clouds.len() {
             // Indexed once per target, on its first calibrated pair.
             let mut surface: Option<SurfaceCloud> = None;
@@ -231,7 +285,7 @@ pub fn calibrate_rig(
                 let c = match calibrate(clouds[a], clouds[b], options.method, &options.methods) {
                     Ok(c) => c,
                     Err(Error::Calibration { kind, message }) => {
-                        fail(a, b, Some(kind), message);
+                        self.fail(a, b, Some(kind), message);
                         continue;
                     }
                     Err(e) => return Err(e),
@@ -246,7 +300,7 @@ pub fn calibrate_rig(
                     options.methods.agreement_distance,
                 );
                 if shared < options.min_pair_overlap {
-                    fail(
+                    self.fail(
                         a,
                         b,
                         None,
@@ -254,17 +308,25 @@ pub fn calibrate_rig(
                     );
                     continue;
                 }
-                measured.push((a, b, c));
+                self.measured.push((a, b, c));
             }
         }
+        Ok(())
     }
-    // Initial poses: breadth-first from the reference over the measured edges.
-    let mut poses: Vec<Option<Isometry3<f64>>> = vec![None; clouds.len()];
+}
+
+/// Initial poses: breadth-first from the reference (node 0) over the measured edges; `None` for
+/// the nodes nothing reaches.
+fn initial_poses(
+    nodes: usize,
+    measured: &[(usize, usize, Calibration)],
+) -> Vec<Option<Isometry3<f64>>> {
+    let mut poses: Vec<Option<Isometry3<f64>>> = vec![None; nodes];
     poses[0] = Some(Isometry3::identity());
     let mut changed = true;
     while changed {
         changed = false;
-        for (a, b, c) in &measured {
+        for (a, b, c) in measured {
             match (poses[*a], poses[*b]) {
                 (Some(pa), None) => {
                     poses[*b] = Some(pa * c.reference_from_target());
@@ -278,7 +340,18 @@ pub fn calibrate_rig(
             }
         }
     }
-    let unconnected: Vec<String> = (1..clouds.len())
+    poses
+}
+
+/// The targets left unplaced; `Err` naming every pair's reason when some are and `require_all` is
+/// set, or when none is placed.
+fn check_connected(
+    names: &[&str],
+    poses: &[Option<Isometry3<f64>>],
+    failures: &[RigFailure],
+    options: &RigOptions,
+) -> Result<Vec<String>> {
+    let unconnected: Vec<String> = (1..poses.len())
         .filter(|&i| poses[i].is_none())
         .map(|i| names[i].to_string())
         .collect();
@@ -303,6 +376,21 @@ pub fn calibrate_rig(
             ),
         ));
     }
+    Ok(unconnected)
+}
+
+/// What [`refine`] gives: the edges with their residuals, `(name, reference_from_name)` of the
+/// placed targets, and the pose graph's report.
+type Refined = (Vec<RigEdge>, Vec<(String, Isometry3<f64>)>, PoseGraphReport);
+
+/// The pose graph over the placed nodes, refined from `poses`, and every usable edge's residual
+/// against the result.
+fn refine(
+    names: &[&str],
+    poses: &[Option<Isometry3<f64>>],
+    measured: Vec<(usize, usize, Calibration)>,
+    options: &RigOptions,
+) -> Result<Refined> {
     // The graph over the placed nodes only (edges between unplaced targets cannot be used).
     let index: Vec<Option<usize>> = {
         let mut next = 0;
@@ -348,15 +436,8 @@ pub fn calibrate_rig(
             });
         }
     }
-    let transforms = (1..clouds.len())
+    let transforms = (1..poses.len())
         .filter_map(|i| refined_of(i).map(|p| (names[i].to_string(), p)))
         .collect();
-    Ok(RigCalibration {
-        transforms,
-        direct,
-        edges,
-        failures,
-        unconnected,
-        pose_graph: solution.report,
-    })
+    Ok((edges, transforms, solution.report))
 }
