@@ -203,18 +203,10 @@ fn graph_cost(poses: &[Isometry3<f64>], edges: &[PoseGraphEdge]) -> f64 {
         .sum()
 }
 
-/// Refines the poses `reference_from_node` of a pose graph whose node 0 (the reference) is fixed:
-/// minimises `Σ eᵀ W e` over the edges by Gauss–Newton (see the [module docs](self)). Returns the
-/// refined poses, node 0 unchanged, and a [`PoseGraphReport`]. `Err(InvalidInput)` for bad
-/// `options`, an edge naming a missing node, a self-loop, a non-finite or non-symmetric
-/// information matrix, or a node in no edge; `Err(Degenerate)` when the information does not
-/// constrain every node.
-pub fn refine_pose_graph(
-    poses: &[Isometry3<f64>],
-    edges: &[PoseGraphEdge],
-    options: &PoseGraphOptions,
-) -> Result<PoseGraphSolution> {
-    options.validate()?;
+/// `Err(InvalidInput)` for an edge joining a node to itself or to a node out of range, an
+/// information matrix that is not finite and symmetric, or a node (other than the fixed first)
+/// in no edge.
+fn validate_graph(poses: &[Isometry3<f64>], edges: &[PoseGraphEdge]) -> Result<()> {
     for (k, e) in edges.iter().enumerate() {
         if e.a >= poses.len() || e.b >= poses.len() || e.a == e.b {
             return Err(Error::InvalidInput(format!(
@@ -238,6 +230,72 @@ pub fn refine_pose_graph(
             "node {lonely} is in no edge: nothing places it"
         )));
     }
+    Ok(())
+}
+
+/// The damped Gauss-Newton normal equations `(J^T W J + damping I, J^T W e)` of the graph at
+/// `current` (every node but the first free), the Jacobian by central differences of
+/// [`edge_error`] under a left perturbation of each free node.
+fn normal_equations(
+    current: &[Isometry3<f64>],
+    edges: &[PoseGraphEdge],
+    options: &PoseGraphOptions,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let size = 6 * current.len().saturating_sub(1);
+    let h = options.jacobian_step;
+    let mut hessian = DMatrix::<f64>::zeros(size, size);
+    let mut gradient = DVector::<f64>::zeros(size);
+    for e in edges {
+        let e0 = edge_error(&e.a_from_b, &current[e.a], &current[e.b]);
+        let mut jac = DMatrix::<f64>::zeros(6, size);
+        for node in [e.a, e.b] {
+            if node == 0 {
+                continue;
+            }
+            for d in 0..6 {
+                let mut delta = Vector6::zeros();
+                delta[d] = h;
+                let moved = |sign: f64| {
+                    let step = se3_exp(&(delta * sign));
+                    let (mut pa, mut pb) = (current[e.a], current[e.b]);
+                    if node == e.a {
+                        pa = step * pa;
+                    } else {
+                        pb = step * pb;
+                    }
+                    edge_error(&e.a_from_b, &pa, &pb)
+                };
+                let column = (moved(1.0) - moved(-1.0)) / (2.0 * h);
+                for r in 0..6 {
+                    jac[(r, 6 * (node - 1) + d)] = column[r];
+                }
+            }
+        }
+        let w = DMatrix::from_iterator(6, 6, e.information.iter().copied());
+        let e0 = DVector::from_iterator(6, e0.iter().copied());
+        let jtw = jac.transpose() * w;
+        hessian += &jtw * &jac;
+        gradient += &jtw * e0;
+    }
+    for i in 0..size {
+        hessian[(i, i)] += options.damping;
+    }
+    (hessian, gradient)
+}
+
+/// Refines the poses `reference_from_node` of a pose graph whose node 0 (the reference) is fixed:
+/// minimises `Σ eᵀ W e` over the edges by Gauss–Newton (see the [module docs](self)). Returns the
+/// refined poses, node 0 unchanged, and a [`PoseGraphReport`]. `Err(InvalidInput)` for bad
+/// `options`, an edge naming a missing node, a self-loop, a non-finite or non-symmetric
+/// information matrix, or a node in no edge; `Err(Degenerate)` when the information does not
+/// constrain every node.
+pub fn refine_pose_graph(
+    poses: &[Isometry3<f64>],
+    edges: &[PoseGraphEdge],
+    options: &PoseGraphOptions,
+) -> Result<PoseGraphSolution> {
+    options.validate()?;
+    validate_graph(poses, edges)?;
     let mut current = poses.to_vec();
     let free = poses.len().saturating_sub(1);
     let mut cost = graph_cost(&current, edges);
@@ -254,48 +312,10 @@ pub fn refine_pose_graph(
             report,
         });
     }
-    let size = 6 * free;
-    let h = options.jacobian_step;
     let mut termination = PoseGraphTermination::MaxIterations;
     for _ in 0..options.max_iterations {
         report.iterations += 1;
-        let mut hessian = DMatrix::<f64>::zeros(size, size);
-        let mut gradient = DVector::<f64>::zeros(size);
-        for e in edges {
-            let e0 = edge_error(&e.a_from_b, &current[e.a], &current[e.b]);
-            let mut jac = DMatrix::<f64>::zeros(6, size);
-            for node in [e.a, e.b] {
-                if node == 0 {
-                    continue;
-                }
-                for d in 0..6 {
-                    let mut delta = Vector6::zeros();
-                    delta[d] = h;
-                    let moved = |sign: f64| {
-                        let step = se3_exp(&(delta * sign));
-                        let (mut pa, mut pb) = (current[e.a], current[e.b]);
-                        if node == e.a {
-                            pa = step * pa;
-                        } else {
-                            pb = step * pb;
-                        }
-                        edge_error(&e.a_from_b, &pa, &pb)
-                    };
-                    let column = (moved(1.0) - moved(-1.0)) / (2.0 * h);
-                    for r in 0..6 {
-                        jac[(r, 6 * (node - 1) + d)] = column[r];
-                    }
-                }
-            }
-            let w = DMatrix::from_iterator(6, 6, e.information.iter().copied());
-            let e0 = DVector::from_iterator(6, e0.iter().copied());
-            let jtw = jac.transpose() * w;
-            hessian += &jtw * &jac;
-            gradient += &jtw * e0;
-        }
-        for i in 0..size {
-            hessian[(i, i)] += options.damping;
-        }
+        let (hessian, gradient) = normal_equations(&current, edges, options);
         let Some(step) = hessian.cholesky().map(|c| -c.solve(&gradient)) else {
             return Err(Error::Degenerate(
                 "the pose graph does not constrain every node (an information matrix is not \
