@@ -110,6 +110,32 @@ pub fn segment_planes(
     max_planes: usize,
     min_inliers: usize,
 ) -> Result<Vec<PlaneFeature>> {
+    let patches = flat_patches(points, threshold);
+    let regions = grow_regions(&patches, threshold)?;
+    let mut features: Vec<PlaneFeature> = Vec::new();
+    for region in regions {
+        features.extend(region_feature(
+            points,
+            &patches.patches,
+            &region,
+            threshold,
+            min_inliers,
+        ));
+    }
+    Ok(distinct(features, max_planes))
+}
+
+/// The flat patches of a cloud with their cells: `patch_of` maps a cell to its patch,
+/// `keys[i]` is patch `i`'s cell.
+pub(super) struct Patches {
+    patches: Vec<Patch>,
+    patch_of: std::collections::HashMap<[i64; 3], usize>,
+    keys: Vec<[i64; 3]>,
+}
+
+/// The flat cells of [`PATCH_SIZE`] of `points` (see [`PATCH_MAX_THICKNESS`],
+/// [`PATCH_MIN_SPREAD`]), in the order of their cell keys.
+fn flat_patches(points: &[Point3<f64>], threshold: f64) -> Patches {
     let mut cells: std::collections::HashMap<[i64; 3], Vec<usize>> =
         std::collections::HashMap::new();
     for (i, p) in points.iter().enumerate() {
@@ -120,11 +146,11 @@ pub fn segment_planes(
         ];
         cells.entry(key).or_default().push(i);
     }
-    let mut keys: Vec<[i64; 3]> = cells.keys().copied().collect();
-    keys.sort_unstable();
+    let mut cell_keys: Vec<[i64; 3]> = cells.keys().copied().collect();
+    cell_keys.sort_unstable();
     let mut patches: Vec<Patch> = Vec::new();
     let mut patch_of: std::collections::HashMap<[i64; 3], usize> = std::collections::HashMap::new();
-    for key in &keys {
+    for key in &cell_keys {
         let Some(indices) = cells.remove(key) else {
             continue;
         };
@@ -152,7 +178,7 @@ pub fn segment_planes(
             indices,
         });
     }
-    let patch_keys: Vec<[i64; 3]> = {
+    let keys: Vec<[i64; 3]> = {
         let mut v = vec![[0i64; 3]; patches.len()];
         for (k, &i) in &patch_of {
             if let Some(slot) = v.get_mut(i) {
@@ -161,6 +187,22 @@ pub fn segment_planes(
         }
         v
     };
+    Patches {
+        patches,
+        patch_of,
+        keys,
+    }
+}
+
+/// Regions of patches grown from the largest: a neighbouring patch joins when its normal is
+/// within [`GROW_ANGLE`] of the region's plane and its centroid within [`GROW_OFFSET`]
+/// thresholds of it.
+fn grow_regions(patches: &Patches, threshold: f64) -> Result<Vec<Vec<usize>>> {
+    let Patches {
+        patches,
+        patch_of,
+        keys: patch_keys,
+    } = patches;
     let mut order: Vec<usize> = (0..patches.len()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(patches[i].indices.len()));
     let mut assigned = vec![false; patches.len()];
@@ -204,36 +246,42 @@ pub fn segment_planes(
         }
         regions.push(region);
     }
-    let mut features: Vec<PlaneFeature> = Vec::new();
-    for region in regions {
-        let candidates: Vec<usize> = region
-            .iter()
-            .flat_map(|&r| patches[r].indices.iter().copied())
-            .collect();
-        if candidates.len() < min_inliers {
-            continue;
-        }
-        let Ok(fit) =
-            Moments::from_points(candidates.iter().filter_map(|&i| points.get(i))).plane()
-        else {
-            continue;
-        };
-        let plane = fit.plane.oriented_toward(&Point3::origin());
-        let mut voxels: Vec<usize> = candidates
-            .into_iter()
-            .filter(|&i| {
-                points
-                    .get(i)
-                    .is_some_and(|p| plane.signed_distance(p).abs() < threshold)
-            })
-            .collect();
-        voxels.sort_unstable();
-        if voxels.len() < min_inliers {
-            continue;
-        }
-        features.extend(feature(points, plane, voxels));
+    Ok(regions)
+}
+
+/// The plane of a region refitted on its patches' points, with its inliers within `threshold`;
+/// `None` for fewer than `min_inliers` or no plane.
+fn region_feature(
+    points: &[Point3<f64>],
+    patches: &[Patch],
+    region: &[usize],
+    threshold: f64,
+    min_inliers: usize,
+) -> Option<PlaneFeature> {
+    let candidates: Vec<usize> = region
+        .iter()
+        .flat_map(|&r| patches[r].indices.iter().copied())
+        .collect();
+    if candidates.len() < min_inliers {
+        return None;
     }
-    Ok(distinct(features, max_planes))
+    let fit = Moments::from_points(candidates.iter().filter_map(|&i| points.get(i)))
+        .plane()
+        .ok()?;
+    let plane = fit.plane.oriented_toward(&Point3::origin());
+    let mut voxels: Vec<usize> = candidates
+        .into_iter()
+        .filter(|&i| {
+            points
+                .get(i)
+                .is_some_and(|p| plane.signed_distance(p).abs() < threshold)
+        })
+        .collect();
+    voxels.sort_unstable();
+    if voxels.len() < min_inliers {
+        return None;
+    }
+    feature(points, plane, voxels)
 }
 
 /// The largest `max_planes` of `features` that are not within [`MERGE_ANGLE`] and
