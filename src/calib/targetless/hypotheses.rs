@@ -370,6 +370,11 @@ impl Occupancy {
     }
 }
 
+/// Whether `pose` puts the target within `max_translation` of the reference.
+pub(super) fn in_range(pose: &Isometry3<f64>, max_translation: f64) -> bool {
+    pose.translation.vector.norm() <= max_translation
+}
+
 /// What the slides score against: the reference's occupied cells and the sampled target points.
 pub(super) struct SlideField {
     pub(super) occupancy: Occupancy,

@@ -236,7 +236,7 @@ pub fn calibrate_targetless(
     // Step 4: verification, the best pose and its rivals.
     let pool = verify_hypotheses(&verifier, &chosen);
     let contenders = || pool.iter().map(|(_, v)| *v);
-    let within = |v: &Verified| v.pose.translation.vector.norm() <= options.max_translation;
+    let within = |v: &Verified| in_range(&v.pose, options.max_translation);
     let settled = settle_best(&pool, &within, &|v| verifier.polish(v));
     let (winner, top, runner_up) = settled.ok_or_else(no_overlap)?;
     let checks = LazyCheck::new(reference, target, &options.check);
@@ -399,7 +399,7 @@ fn no_matching_pair(reference: &Prepared, target: &Prepared, options: &Targetles
 /// The best supported plane hypotheses within max_translation
 /// ([`TargetlessOptions::max_verified`] of them), and half as many challengers beyond it.
 fn best_supported(candidates: &[Candidate], options: &TargetlessOptions) -> Vec<Candidate> {
-    let in_range = |c: &&Candidate| c.pose.translation.vector.norm() <= options.max_translation;
+    let in_range = |c: &&Candidate| in_range(&c.pose, options.max_translation);
     candidates
         .iter()
         .filter(in_range)

@@ -7,7 +7,7 @@ use std::cell::OnceCell;
 
 use nalgebra::{Point3, Vector3};
 
-use super::hypotheses::{same_pose, slide_peaks, SlideField};
+use super::hypotheses::{in_range, same_pose, slide_peaks, SlideField};
 use super::segment::{PlaneFeature, Prepared};
 use super::symmetry::half_turns;
 use super::verify::{
@@ -105,7 +105,7 @@ impl<'a> Contest<'a> {
 
     /// Whether `v` lies within max_translation.
     pub(super) fn within(&self, v: &Verified) -> bool {
-        v.pose.translation.vector.norm() <= self.max_translation
+        in_range(&v.pose, self.max_translation)
     }
 
     /// Whether `r` scores close enough to the best to be a rival: [`AMBIGUITY_RATIO`] of the

@@ -4,7 +4,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{pose, reference_planes, scan_pair, uniform, Scene, PLACEMENT_ATTEMPTS};
+use super::{
+    pose, rectangle_shapes, reference_planes, scan_pair, uniform, Scene, PLACEMENT_ATTEMPTS,
+};
 use crate::error::{Error, Result};
 use crate::geometry::Plane;
 use crate::sim::shapes::{Cuboid, IntensityRange, Rectangle, Shape};
@@ -84,18 +86,7 @@ pub fn corner_scene(model: &BeamModel, options: &CornerOptions) -> Result<Scene>
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let rectangles = corner_walls(&wall2, options.extra_walls)?;
     let sensors = place_sensors(&mut rng, &bisector, options);
-    let mut shapes: Vec<Shape> = rectangles
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let intensity = if i == 2 {
-                IntensityRange::GROUND
-            } else {
-                IntensityRange::WALL
-            };
-            Shape::rectangle(*r, intensity)
-        })
-        .collect();
+    let mut shapes = rectangle_shapes(&rectangles, 2);
     add_clutter_boxes(&mut rng, &mut shapes, &sensors, options)?;
     let CornerSensors {
         world_from_reference,

@@ -27,7 +27,7 @@ use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vecto
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 
-use super::shapes::Shape;
+use super::shapes::{IntensityRange, Rectangle, Shape};
 use super::{scan, BeamModel, Scan, ScanOptions};
 use crate::error::Result;
 use crate::geometry::{Line, Plane};
@@ -131,6 +131,23 @@ fn scan_pair(
         scan(model, shapes, world_from[0], &options(seeds.0))?,
         scan(model, shapes, world_from[1], &options(seeds.1))?,
     ))
+}
+
+/// `rectangles` as shapes in order: the one at `ground` with the ground's intensities, the rest
+/// with a wall's.
+fn rectangle_shapes(rectangles: &[Rectangle], ground: usize) -> Vec<Shape> {
+    rectangles
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let intensity = if i == ground {
+                IntensityRange::GROUND
+            } else {
+                IntensityRange::WALL
+            };
+            Shape::rectangle(*r, intensity)
+        })
+        .collect()
 }
 
 /// The rotation `Rz(yaw) Ry(pitch) Rx(roll)` (helper for callers building poses).

@@ -4,7 +4,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{pose, reference_planes, scan_pair, uniform, Pole, Scene, POLE_PAINT};
+use super::{
+    pose, rectangle_shapes, reference_planes, scan_pair, uniform, Pole, Scene, POLE_PAINT,
+};
 use crate::error::{Error, Result};
 use crate::geometry::Plane;
 use crate::sim::shapes::{Cuboid, Cylinder, IntensityRange, Rectangle, Shape};
@@ -261,18 +263,7 @@ fn mount_sensors(
 
 /// The shapes in scan order: rectangles (the road ground-bright, the rest walls), boxes, poles.
 fn street_shapes(rectangles: &[Rectangle], boxes: &[Cuboid], cylinders: &[Cylinder]) -> Vec<Shape> {
-    let mut shapes: Vec<Shape> = rectangles
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let intensity = if i == 0 {
-                IntensityRange::GROUND
-            } else {
-                IntensityRange::WALL
-            };
-            Shape::rectangle(*r, intensity)
-        })
-        .collect();
+    let mut shapes = rectangle_shapes(rectangles, 0);
     shapes.extend(
         boxes
             .iter()
