@@ -6,7 +6,7 @@ use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 
 use super::arrays::{self, to_numpy};
-use super::calib::matrix4;
+use super::result::matrix4;
 use super::run;
 use crate::check::{check as rs_check, CheckOptions, CheckReport as Report};
 use crate::geometry::isometry_from_matrix;

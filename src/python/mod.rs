@@ -19,6 +19,7 @@ mod check;
 mod io;
 mod kernels;
 mod ransac;
+mod result;
 mod sim;
 
 create_exception!(
@@ -104,6 +105,7 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     io::register(m)?;
     kernels::register(m)?;
     ransac::register(m)?;
+    result::register(m)?;
     calib::register(m)?;
     check::register(m)?;
     sim::register(m)?;
