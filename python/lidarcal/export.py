@@ -149,7 +149,8 @@ def to_dict(
     diagnostics: dict[str, Any] = {
         "solver": refinement.solver,
         "iterations": int(refinement.iterations),
-        "cost": float(refinement.cost),
+        # NaN (a solver without a cost: ICP, none) would not survive a round trip: null.
+        "cost": None if math.isnan(refinement.cost) else float(refinement.cost),
         "termination": refinement.termination,
         "inlier_counts": [
             [len(i) for i in result.inliers_reference],
