@@ -126,7 +126,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
 pub use super::result::TargetlessCalibration;
 use super::result::{Refinement, Solver};
-use super::{Stopwatch, Timings};
+use super::Stopwatch;
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::Plane;
 use crate::icp::IcpResult;
@@ -268,6 +268,7 @@ pub fn calibrate_targetless(
     ensure_settled(&pose, icp.as_ref(), ambiguity, options)?;
     let check = checks.pair()?.certify(&pose)?;
     let planes = matched_planes(&reference_ds, &target_ds, &refined, &pose);
+    clock.lap("check");
     let details = TargetlessDetails {
         hypothesis_counts: [enumerated, candidates.len()],
         verified: chosen.len(),
@@ -288,7 +289,7 @@ pub fn calibrate_targetless(
         features: [reference_ds.features, target_ds.features],
         report: refined.report,
     };
-    let result = TargetlessCalibration {
+    Ok(TargetlessCalibration {
         reference_from_target: pose,
         initial_reference_from_target: winner.pose,
         check,
@@ -297,13 +298,8 @@ pub fn calibrate_targetless(
         inliers_target: planes.inliers_target,
         covariance: covariance(details.icp.as_ref(), details.report.as_ref()),
         refinement: refinement(&details, &pose, &refined.pose),
-        timings: Timings::default(),
-        details,
-    };
-    clock.lap("check");
-    Ok(TargetlessCalibration {
         timings: clock.finish(),
-        ..result
+        details,
     })
 }
 
