@@ -169,6 +169,18 @@ where
 #[doc = include_str!("../README.md")]
 #[cfg(all(doctest, feature = "sim"))]
 pub struct ReadmeDoctests;
+/// The Rust examples of the documentation pages (`docs/`), run as doctests like the README's.
+#[doc = include_str!("../docs/rust.md")]
+#[cfg(all(doctest, feature = "sim"))]
+pub struct RustPageDoctests;
+/// The Rust example of `docs/results.md`.
+#[doc = include_str!("../docs/results.md")]
+#[cfg(all(doctest, feature = "sim"))]
+pub struct ResultsPageDoctests;
+/// The Rust example of `docs/methods/auto_and_rig.md`.
+#[doc = include_str!("../docs/methods/auto_and_rig.md")]
+#[cfg(all(doctest, feature = "sim"))]
+pub struct AutoAndRigPageDoctests;
 pub use geometry::{Line, Plane};
 pub use kabsch::{kabsch, KabschSolution};
 pub use lm::{LmOptions, LmReport, LmSolution, Loss, Termination};
