@@ -40,9 +40,9 @@ use crate::geometry::{orthonormal_basis, Line};
 /// Fewest points a cylinder fit accepts.
 pub const MIN_POINTS: usize = 6;
 /// Iteration cap of the Levenberg–Marquardt loop.
-pub const MAX_ITERATIONS: usize = 100;
+const MAX_ITERATIONS: usize = 100;
 /// Stop when a step moves the axis by less than this (metres, or radians times metres of extent).
-pub const STEP_TOLERANCE: f64 = 1e-10;
+const STEP_TOLERANCE: f64 = 1e-10;
 /// Initial Levenberg–Marquardt damping, relative to the largest diagonal entry of `J^T J`.
 const INITIAL_DAMPING: f64 = 1e-6;
 /// Points closer to the axis than this fraction of the radius get no radial direction.
