@@ -297,4 +297,5 @@ pub fn inliers<E: Estimator>(
 /// Per-point passes (inliers, joint assignment) run in parallel only from this many points: below
 /// it, handing the work to the thread pool costs more than it saves (measured on 10k-point clouds).
 /// The output is the same either way.
+#[cfg(feature = "parallel")]
 const PARALLEL_MIN_POINTS: usize = 16_384;
