@@ -6,8 +6,8 @@
 //!   (dense near the sensor, sparse far away) and bounds the work.
 //! * [`SurfaceCloud`] is the reference side of ICP: the points, a k-d tree over them (the
 //!   [`kiddo`] crate's immutable tree: pure Rust, no threads of its own) and a unit normal per point from the
-//!   principal axes of its [`NORMAL_NEIGHBOURS`] nearest neighbours. Points whose neighbourhood is
-//!   not flat (foliage, edges: surface variation above [`MAX_SURFACE_VARIATION`]) get no normal and
+//!   principal axes of its 10 nearest neighbours. Points whose neighbourhood is
+//!   not flat (foliage, edges: surface variation above 0.08) get no normal and
 //!   are never used as correspondences.
 //! * [`point_to_plane_icp`] aligns a target cloud to it. Each iteration pairs every sampled target
 //!   point with its nearest reference point within the current correspondence distance, weights
@@ -65,10 +65,10 @@ use crate::geometry::se3_exp;
 use crate::lm::{accumulate, Accumulator, Loss, NormalEquations};
 
 /// Neighbours used to estimate each reference point's normal.
-pub const NORMAL_NEIGHBOURS: usize = 10;
+const NORMAL_NEIGHBOURS: usize = 10;
 /// Largest surface variation `l0 / (l0 + l1 + l2)` of a neighbourhood that still counts as a
 /// surface (0 for a perfect plane, 1/3 for isotropic scatter).
-pub const MAX_SURFACE_VARIATION: f64 = 0.08;
+const MAX_SURFACE_VARIATION: f64 = 0.08;
 /// Largest voxel count along one axis accepted by [`voxel_downsample`].
 const MAX_VOXEL_INDEX: f64 = 1e12;
 
@@ -138,7 +138,7 @@ pub struct SurfaceCloud {
 }
 
 impl SurfaceCloud {
-    /// Indexes `points` and estimates their normals. Needs at least [`NORMAL_NEIGHBOURS`] finite
+    /// Indexes `points` and estimates their normals. Needs at least 10 finite
     /// points, and fewer than 2^32.
     pub fn new(points: Vec<Point3<f64>>) -> Result<Self> {
         ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
@@ -164,7 +164,7 @@ impl SurfaceCloud {
         })
     }
 
-    /// The moments of the [`NORMAL_NEIGHBOURS`] nearest points of `p`.
+    /// The moments of the 10 nearest points of `p`.
     fn neighbourhood(&self, p: &Point3<f64>) -> Moments {
         let mut m = Moments::new(*p);
         let k = NonZeroUsize::new(NORMAL_NEIGHBOURS).unwrap_or(NonZeroUsize::MIN);

@@ -32,7 +32,7 @@ use crate::error::{ensure_finite, Error, Result};
 
 /// Input whose second singular value is below this fraction of the first is refused as degenerate
 /// (see the module docs: about 0.11 degrees between two unit vectors).
-pub const MIN_SINGULAR_RATIO: f64 = 1e-6;
+const MIN_SINGULAR_RATIO: f64 = 1e-6;
 
 /// The result of [`kabsch`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -13,7 +13,7 @@
 //! Gaussian is dropped, so `C` is in `(0, 1]`). A better calibration gives a crisper cloud: a
 //! **larger** `C` and a smaller `H`.
 //!
-//! The double sum is `O(N^2)`; here pairs further apart than [`RQE_TRUNCATION`] kernel standard
+//! The double sum is `O(N^2)`; here pairs further apart than 3 kernel standard
 //! deviations (`3 sqrt(2) sigma`) are dropped, where the kernel is below `exp(-4.5) = 0.011` of its
 //! peak, and the remaining pairs are found with the hash [`Grid`] of cell `3 sqrt(2) sigma`. That
 //! makes it `O(N k)` for `k` neighbours per point. The truncation lowers `C` by a bounded relative
@@ -36,7 +36,7 @@ use crate::cluster::Grid;
 use crate::error::{Error, Result};
 
 /// Pairs further apart than this many kernel standard deviations (`sqrt(2) sigma`) are dropped.
-pub const RQE_TRUNCATION: f64 = 3.0;
+const RQE_TRUNCATION: f64 = 3.0;
 
 /// The result of [`rqe`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -11,7 +11,7 @@
 //! nearest range per bin. A point (in that sensor's frame) is a **violation** when its bin holds a
 //! return and the point lies clearly in front of it: `r < r_near - (VIOLATION_MARGIN +
 //! VIOLATION_RELATIVE_MARGIN r_near)`. Points beyond the nearest return (occluded), in empty bins
-//! (sky, outside the field of view) or within [`MIN_VISIBILITY_RANGE`] of the sensor (the blind
+//! (sky, outside the field of view) or within 3 m of the sensor (the blind
 //! zone, the vehicle itself) are neutral. Keeping the *nearest* return per bin is the conservative
 //! choice: a bin that holds the edge of a wall and the road behind it only counts the wall.
 //!
@@ -37,11 +37,11 @@ use crate::error::{ensure_finite, Error, Result};
 
 /// Points closer than this to the sensor (metres) are neutral: the blind zone of a spinning
 /// LiDAR and the vehicle it is mounted on.
-pub const MIN_VISIBILITY_RANGE: f64 = 3.0;
+const MIN_VISIBILITY_RANGE: f64 = 3.0;
 /// Absolute part of the margin by which a point must lie in front of the nearest return (m).
-pub const VIOLATION_MARGIN: f64 = 0.5;
+const VIOLATION_MARGIN: f64 = 0.5;
 /// Relative part of that margin (share of the nearest return's range): bins widen with range.
-pub const VIOLATION_RELATIVE_MARGIN: f64 = 0.05;
+const VIOLATION_RELATIVE_MARGIN: f64 = 0.05;
 
 /// The nearest range per azimuth/elevation bin of one scan, around its sensor (see the module
 /// docs).
@@ -58,7 +58,7 @@ impl RangeImage {
     pub const DEFAULT_RESOLUTION: f64 = std::f64::consts::PI / 180.0;
 
     /// Bins `points` (in the sensor's frame) at `resolution` radians. Points within
-    /// [`MIN_VISIBILITY_RANGE`] are left out.
+    /// 3 m are left out.
     pub fn new(points: &[Point3<f64>], resolution: f64) -> Result<Self> {
         if !(resolution.is_finite() && resolution > 1e-4 && resolution < 1.0) {
             return Err(Error::InvalidInput(format!(
@@ -113,7 +113,7 @@ impl RangeImage {
 
     /// The number of `points` (another scan's, in its own sensor's frame) that violate this
     /// scan's free space once mapped by `this_from_points`. Points within
-    /// [`MIN_VISIBILITY_RANGE`] of their own sensor are left out as well: they are mostly the
+    /// 3 m of their own sensor are left out as well: they are mostly the
     /// vehicle both sensors ride on, which the other sensor's blind zone hides.
     pub fn count_violations(
         &self,

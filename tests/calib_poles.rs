@@ -3,7 +3,7 @@
 #![cfg(feature = "sim")]
 
 use lidarcal::calib::poles::{calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor};
-use lidarcal::sim::scenes::{poles_scene, PolesOptions, Scene, POLE_PAINT};
+use lidarcal::sim::scenes::{poles_scene, PolesOptions, Scene};
 use lidarcal::sim::shapes::{Cylinder, IntensityRange, Rectangle, Shape};
 use lidarcal::sim::{scan, BeamModel, Preset, Scan, ScanOptions};
 use lidarcal::{Error, FailureKind, Result};
@@ -222,7 +222,7 @@ fn three_poles_are_all_matched() {
             .unwrap()
             .with_band(0.5, 2.5, IntensityRange::RETROREFLECTIVE)
             .unwrap();
-        shapes.push(Shape::cylinder(c, POLE_PAINT));
+        shapes.push(Shape::cylinder(c, IntensityRange::POLE));
     }
     let pose = |x: f64, y: f64, yaw: f64, roll: f64| {
         Isometry3::from_parts(
@@ -334,7 +334,7 @@ fn a_symmetric_scene_is_refused() {
             .unwrap()
             .with_band(0.5, 2.5, IntensityRange::RETROREFLECTIVE)
             .unwrap();
-        shapes.push(Shape::cylinder(cyl, POLE_PAINT));
+        shapes.push(Shape::cylinder(cyl, IntensityRange::POLE));
     }
     let pose = |x: f64, yaw: f64| {
         Isometry3::from_parts(

@@ -4,7 +4,8 @@ Checked against the built module by ``python -m mypy.stubtest`` (``scripts/check
 that exist only here (type aliases, ``TypedDict`` shapes) start with ``_`` so that nobody imports
 them at runtime, and a default the extension cannot show at runtime (PyO3 renders a tuple or
 ``Some(..)`` default as ``...``) is written ``...`` here rather than copied from the Rust
-signature, where it lives.
+signature, where it lives. A keyword whose default lives in the Rust core takes ``None``; the
+docstring says the value, and ``tests/python/test_defaults.py`` holds it to ``_defaults()``.
 """
 
 from collections.abc import Sequence
@@ -36,6 +37,7 @@ __all__ = [
     "Shape",
     "TargetlessDetails",
     "__version__",
+    "_defaults",
     "calibrate_auto",
     "calibrate_planes",
     "calibrate_poles",
@@ -160,7 +162,13 @@ def check(
     samples: int | None = None,
     rotation_tolerance_deg: float | None = None,
     translation_tolerance_m: float | None = None,
-) -> CheckReport: ...
+) -> CheckReport:
+    """Checks ``transform`` (``reference_from_target``) against the two clouds.
+
+    ``noise`` None measures the range noise. Defaults (Rust ``CheckOptions::default()``):
+    ``voxel_size=0.1``, ``samples=4000``, ``rotation_tolerance_deg=0.5``,
+    ``translation_tolerance_m=0.06``.
+    """
 
 class FileFormatError(ValueError):
     """A file is not a valid point cloud of its format; the message names the file and why."""
@@ -564,30 +572,46 @@ def ransac_plane(
     points: _ArrayLike,
     distance_threshold: float,
     *,
-    confidence: float = 0.999,
-    max_iterations: int = 10000,
+    confidence: float | None = None,
+    max_iterations: int | None = None,
     seed: int = 0,
-) -> Plane: ...
+) -> Plane:
+    """The plane with the most support among ``points`` (RANSAC, MSAC scoring, refit).
+
+    Defaults (Rust ``RansacOptions::new``): ``confidence=0.999``, ``max_iterations=10000``.
+    """
+
 def ransac_line(
     points: _ArrayLike,
     distance_threshold: float,
     *,
-    confidence: float = 0.999,
-    max_iterations: int = 10000,
+    confidence: float | None = None,
+    max_iterations: int | None = None,
     seed: int = 0,
-) -> Line: ...
+) -> Line:
+    """The line with the most support among ``points`` (see :func:`ransac_plane`).
+
+    Defaults (Rust ``RansacOptions::new``): ``confidence=0.999``, ``max_iterations=10000``.
+    """
+
 def extract_planes(
     points: _ArrayLike,
     count: int = 3,
     distance_threshold: float = 0.05,
     *,
-    min_inliers: int = 50,
-    refinement_rounds: int = 3,
+    min_inliers: int | None = None,
+    refinement_rounds: int | None = None,
     min_angle_deg: float | None = None,
-    confidence: float = 0.999,
-    max_iterations: int = 10000,
+    confidence: float | None = None,
+    max_iterations: int | None = None,
     seed: int = 0,
-) -> list[Plane]: ...
+) -> list[Plane]:
+    """``count`` planes, largest first: sequential RANSAC, then a joint reassignment and refit.
+
+    Defaults (Rust ``ExtractOptions::new`` and ``RansacOptions::new``): ``min_inliers=50``,
+    ``refinement_rounds=3``, ``confidence=0.999``, ``max_iterations=10000``.
+    """
+
 def score_planes(
     points: _ArrayLike, planes: _ArrayLike, distance_threshold: float
 ) -> tuple[_F64Array, _I64Array]: ...
@@ -607,20 +631,32 @@ def refine_point_to_plane(
     initial_transform: _ArrayLike | None = None,
     *,
     frames: Sequence[_Frame] | None = None,
-    loss: _LossName = "squared",
+    loss: _LossName | None = None,
     loss_scale: float = 0.1,
-    max_iterations: int = 100,
-) -> RefineResult: ...
+    max_iterations: int | None = None,
+) -> RefineResult:
+    """Levenberg-Marquardt refinement of ``reference_from_target`` from point-to-plane residuals.
+
+    Defaults (Rust ``Loss::default()`` and ``LmOptions::default()``): ``loss='squared'``,
+    ``max_iterations=100``.
+    """
+
 def refine_point_to_line(
     lines: _ArrayLike,
     points: Sequence[_ArrayLike],
     initial_transform: _ArrayLike | None = None,
     *,
     frames: Sequence[_Frame] | None = None,
-    loss: _LossName = "squared",
+    loss: _LossName | None = None,
     loss_scale: float = 0.1,
-    max_iterations: int = 100,
-) -> RefineResult: ...
+    max_iterations: int | None = None,
+) -> RefineResult:
+    """Levenberg-Marquardt refinement of ``reference_from_target`` from point-to-line distances.
+
+    Defaults (Rust ``Loss::default()`` and ``LmOptions::default()``): ``loss='squared'``,
+    ``max_iterations=100``.
+    """
+
 def point_to_plane_residuals(
     points: _ArrayLike, plane: _ArrayLike, transform: _ArrayLike, frame: _Frame = "target"
 ) -> tuple[_F64Array, _F64Array]: ...
@@ -639,12 +675,18 @@ class BeamModel:
     def custom(
         elevations_deg: _ArrayLike,
         *,
-        columns: int = 1800,
-        min_range: float = 0.5,
-        max_range: float = 100.0,
-        range_noise: float = 0.01,
+        columns: int | None = None,
+        min_range: float | None = None,
+        max_range: float | None = None,
+        range_noise: float | None = None,
         name: str = "custom",
-    ) -> BeamModel: ...
+    ) -> BeamModel:
+        """A custom model from beam elevations in degrees.
+
+        Defaults (Rust ``BeamSettings::default()``): ``columns=1800``, ``min_range=0.5``,
+        ``max_range=100``, ``range_noise=0.01``.
+        """
+
     @property
     def name(self) -> str: ...
     @property
@@ -670,15 +712,19 @@ class Shape:
         edge_u: _ArrayLike,
         edge_v: _ArrayLike,
         *,
-        intensity: tuple[float, float] = ...,
-    ) -> Shape: ...
+        intensity: tuple[float, float] | None = None,
+    ) -> Shape:
+        """A rectangle; default (Rust ``IntensityRange::WALL``): ``intensity=(20, 70)``."""
+
     @staticmethod
     def cuboid(
         size: _ArrayLike,
         pose: _ArrayLike | None = None,
         *,
-        intensity: tuple[float, float] = ...,
-    ) -> Shape: ...
+        intensity: tuple[float, float] | None = None,
+    ) -> Shape:
+        """A box; default (Rust ``IntensityRange::CLUTTER``): ``intensity=(10, 90)``."""
+
     @staticmethod
     def cylinder(
         base: _ArrayLike,
@@ -686,10 +732,16 @@ class Shape:
         length: float,
         radius: float,
         *,
-        intensity: tuple[float, float] = ...,
+        intensity: tuple[float, float] | None = None,
         band: tuple[float, float] | None = None,
-        band_intensity: tuple[float, float] = ...,
-    ) -> Shape: ...
+        band_intensity: tuple[float, float] | None = None,
+    ) -> Shape:
+        """A finite cylinder with an optional taped band.
+
+        Defaults (Rust ``IntensityRange::POLE`` and ``RETROREFLECTIVE``): ``intensity=(30, 80)``,
+        ``band_intensity=(235, 255)``.
+        """
+
     @property
     def kind(self) -> str: ...
 
@@ -729,48 +781,54 @@ def sim_scan(
     *,
     seed: int = 0,
     noise: float | None = None,
-    dropout: float = 0.0,
+    dropout: float | None = None,
     with_ring: bool = False,
 ) -> _F64Array: ...
 def sim_corner_scene(
     model: str | BeamModel | None = None,
     *,
     seed: int = 0,
-    clutter_boxes: int = 4,
-    extra_walls: int = 0,
+    clutter_boxes: int | None = None,
+    extra_walls: int | None = None,
     noise: float | None = None,
-    dropout: float = 0.0,
-    wall_angle_deg: float = 90.0,
-    target_tilt_deg: float = 10.0,
+    dropout: float | None = None,
+    wall_angle_deg: float | None = None,
+    target_tilt_deg: float | None = None,
     target_relative_yaw_deg: float | None = None,
 ) -> Scene: ...
 def sim_poles_scene(
     model: str | BeamModel | None = None,
     *,
     seed: int = 0,
-    radius: float = 0.1,
-    distance: float = 5.0,
-    distractor: bool = False,
+    radius: float | None = None,
+    distance: float | None = None,
+    distractor: bool | None = None,
     noise: float | None = None,
-    dropout: float = 0.0,
-    max_tilt_deg: float = 15.0,
-    target_upside_down: bool = False,
+    dropout: float | None = None,
+    max_tilt_deg: float | None = None,
+    target_upside_down: bool | None = None,
 ) -> Scene: ...
 def sim_street_scene(
     *,
     seed: int = 0,
-    side: Literal["left", "right"] = "left",
-    target_tilt_deg: float = 45.0,
-    clutter: bool = True,
-    cross_wall: bool = False,
+    side: Literal["left", "right"] | None = None,
+    target_tilt_deg: float | None = None,
+    clutter: bool | None = None,
+    cross_wall: bool | None = None,
     noise: float | None = None,
-    target_offset: float = 0.0,
+    target_offset: float | None = None,
 ) -> Scene: ...
 def sim_corridor_scene(*, seed: int = 0) -> Scene: ...
 def sim_paper_scene(
-    *, alpha_deg: float = 90.0, configuration: int | None = ..., seed: int = 0
+    *, alpha_deg: float | None = None, configuration: int | None = ..., seed: int = 0
 ) -> Scene: ...
 def sim_pole_axis_trial(
     distance: float, radius: float, seed: int
 ) -> tuple[int, float, float, float, float]: ...
 def write_pcd(path: str | PathLike[str], points: _ArrayLike, *, ascii: bool = False) -> None: ...
+
+# --- the Rust defaults behind the keywords above that take None ---
+
+def _defaults() -> dict[str, dict[str, Any]]:
+    """``{function: {keyword: default}}``: the value a keyword left out (or None) takes, read
+    from the Rust ``Default`` or constant it comes from (``Class.method`` names a method)."""

@@ -36,6 +36,7 @@ from lidarcal import (
     read_points,
     sim,
 )
+from lidarcal._lidarcal import _defaults
 from lidarcal.export import (
     OUTPUT_SUFFIXES,
     frame_id,
@@ -44,6 +45,11 @@ from lidarcal.export import (
     to_dict,
     write_result,
 )
+
+# Defaults from Rust (`--help` shows them): the beam model (`Preset::default()`) and the corner
+# scene's options (`CornerOptions::default()`).
+_MODEL = _defaults()["sim_scan"]["model"]
+_CORNER = _defaults()["sim_corner_scene"]
 
 
 @click.group()
@@ -60,7 +66,7 @@ def main() -> None:
     default="corner",
     show_default=True,
 )
-@click.option("--model", type=click.Choice(list(sim.MODELS)), default="vlp16", show_default=True)
+@click.option("--model", type=click.Choice(list(sim.MODELS)), default=_MODEL, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option(
     "--output",
@@ -139,23 +145,29 @@ def _errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
 
 
 @main.command()
-@click.option("--model", type=click.Choice(list(sim.MODELS)), default="vlp16", show_default=True)
+@click.option("--model", type=click.Choice(list(sim.MODELS)), default=_MODEL, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True, help="Scene and sampler seed.")
 @click.option(
     "--wall-angle",
     type=float,
-    default=90.0,
+    default=_CORNER["wall_angle_deg"],
     show_default=True,
     help="Angle between the two walls, degrees.",
 )
 @click.option(
     "--tilt",
     type=float,
-    default=10.0,
+    default=_CORNER["target_tilt_deg"],
     show_default=True,
     help="Largest roll/pitch of the second sensor, degrees.",
 )
-@click.option("--clutter", type=int, default=4, show_default=True, help="Clutter boxes.")
+@click.option(
+    "--clutter",
+    type=int,
+    default=_CORNER["clutter_boxes"],
+    show_default=True,
+    help="Clutter boxes.",
+)
 @click.option(
     "--output",
     type=click.Path(dir_okay=False, path_type=Path),

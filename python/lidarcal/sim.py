@@ -5,6 +5,10 @@ Points come back in the sensor frame as ``(N, 4)`` float64 arrays ``[x, y, z, in
 first, then by azimuth counter-clockwise from the sensor's +x axis. The same ``seed`` gives
 bit-identical points on any number of threads.
 
+A keyword left ``None`` takes its default from the Rust core (the options structs of
+``lidarcal::sim``), as each function's docstring says; ``lidarcal._lidarcal._defaults()`` lists
+them all, and a test holds these docstrings to it.
+
 Example::
 
     import numpy as np
@@ -69,9 +73,11 @@ def rectangle(
     edge_u: npt.ArrayLike,
     edge_v: npt.ArrayLike,
     *,
-    intensity: Intensity = (20.0, 70.0),
+    intensity: Intensity | None = None,
 ) -> Shape:
     """A rectangle ``corner + s * edge_u + t * edge_v`` (``s, t`` in [0, 1], edges orthogonal).
+
+    Default (Rust ``IntensityRange::WALL``): ``intensity=(20, 70)``.
 
     >>> wall = rectangle([0, 0, 0], [10, 0, 0], [0, 0, 3])
     """
@@ -82,9 +88,11 @@ def cuboid(
     size: npt.ArrayLike,
     pose: npt.ArrayLike | None = None,
     *,
-    intensity: Intensity = (10.0, 90.0),
+    intensity: Intensity | None = None,
 ) -> Shape:
     """A box of full ``size`` centred at the origin of ``pose`` (4x4 ``world_from_box``).
+
+    Default (Rust ``IntensityRange::CLUTTER``): ``intensity=(10, 90)``.
 
     >>> crate = cuboid([1.0, 1.0, 1.0])
     """
@@ -97,11 +105,14 @@ def cylinder(
     length: float,
     radius: float,
     *,
-    intensity: Intensity = (30.0, 80.0),
+    intensity: Intensity | None = None,
     band: tuple[float, float] | None = None,
-    band_intensity: Intensity = (235.0, 255.0),
+    band_intensity: Intensity | None = None,
 ) -> Shape:
     """A finite cylinder (a pole), optionally with a taped ``band`` (metres from the base).
+
+    Defaults (Rust ``IntensityRange::POLE`` and ``RETROREFLECTIVE``): ``intensity=(30, 80)``,
+    ``band_intensity=(235, 255)``.
 
     >>> pole = cylinder([5, 0, 0], [0, 0, 1], 3.0, 0.1, band=(0.5, 2.5))
     """
@@ -118,12 +129,12 @@ def cylinder(
 
 def scan(
     shapes: Sequence[Shape],
-    model: Model = "vlp16",
+    model: Model | None = None,
     sensor_pose: npt.ArrayLike | None = None,
     *,
     seed: int = 0,
     noise: float | None = None,
-    dropout: float = 0.0,
+    dropout: float | None = None,
     with_ring: bool = False,
 ) -> npt.NDArray[np.float64]:
     """One revolution of ``model`` at ``sensor_pose`` (4x4 ``world_from_sensor``, default identity).
@@ -131,6 +142,9 @@ def scan(
     ``noise`` overrides the model's range noise (metres, 1 sigma); ``dropout`` is the probability
     that a return is lost. Raises ``ValueError`` for bad input (unknown model, non-rigid pose,
     dropout outside [0, 1], negative noise).
+
+    Defaults (Rust ``Preset::default()`` and ``ScanOptions::default()``): ``model='vlp16'``,
+    ``dropout=0``.
     """
     return sim_scan(
         shapes,
@@ -144,15 +158,15 @@ def scan(
 
 
 def corner_scene(
-    model: Model = "vlp16",
+    model: Model | None = None,
     *,
     seed: int = 0,
-    clutter_boxes: int = 4,
-    extra_walls: int = 0,
+    clutter_boxes: int | None = None,
+    extra_walls: int | None = None,
     noise: float | None = None,
-    dropout: float = 0.0,
-    wall_angle_deg: float = 90.0,
-    target_tilt_deg: float = 10.0,
+    dropout: float | None = None,
+    wall_angle_deg: float | None = None,
+    target_tilt_deg: float | None = None,
     target_relative_yaw_deg: float | None = None,
 ) -> Scene:
     """A building corner (two walls and the ground) scanned by two spinning LiDARs.
@@ -160,7 +174,11 @@ def corner_scene(
     ``scene.planes`` holds wall 1, wall 2, the ground and any extra walls in the reference frame.
     ``wall_angle_deg`` is the angle between the walls (90 makes a cube corner with the ground,
     which the planar method can only match with ``up``); the target sensor is tilted by up to
-    ``target_tilt_deg`` and turned by ``target_relative_yaw_deg`` (random when None).
+    ``target_tilt_deg`` and turned by ``target_relative_yaw_deg`` (random when None); ``noise``
+    None is the model's own.
+
+    Defaults (Rust ``CornerOptions::default()``): ``model='vlp16'``, ``clutter_boxes=4``,
+    ``extra_walls=0``, ``dropout=0``, ``wall_angle_deg=90``, ``target_tilt_deg=10``.
 
     >>> scene = corner_scene("vlp16", seed=0, clutter_boxes=0)
     >>> scene.planes.shape
@@ -180,22 +198,25 @@ def corner_scene(
 
 
 def poles_scene(
-    model: Model = "vlp16",
+    model: Model | None = None,
     *,
     seed: int = 0,
-    radius: float = 0.1,
-    distance: float = 5.0,
-    distractor: bool = False,
+    radius: float | None = None,
+    distance: float | None = None,
+    distractor: bool | None = None,
     noise: float | None = None,
-    dropout: float = 0.0,
-    max_tilt_deg: float = 15.0,
-    target_upside_down: bool = False,
+    dropout: float | None = None,
+    max_tilt_deg: float | None = None,
+    target_upside_down: bool | None = None,
 ) -> Scene:
     """Two non-parallel taped poles and the ground, optionally a bright road sign.
 
-    ``noise`` defaults to 0.006 m; ``scene.pole_axes`` and ``scene.pole_radii`` hold the truth.
-    Each sensor's roll and pitch are drawn within ``max_tilt_deg``; ``target_upside_down`` adds a
-    180 degree roll to the target.
+    ``scene.pole_axes`` and ``scene.pole_radii`` hold the truth. Each sensor's roll and pitch are
+    drawn within ``max_tilt_deg``; ``target_upside_down`` adds a 180 degree roll to the target.
+
+    Defaults (Rust ``PolesOptions::default()``, the noise its ``POLES_RANGE_NOISE``):
+    ``model='vlp16'``, ``radius=0.1``, ``distance=5``, ``distractor=False``, ``noise=0.006``,
+    ``dropout=0``, ``max_tilt_deg=15``, ``target_upside_down=False``.
 
     >>> scene = poles_scene(seed=0)
     >>> scene.pole_axes.shape
@@ -217,23 +238,27 @@ def poles_scene(
 def street_scene(
     *,
     seed: int = 0,
-    side: str = "left",
-    target_tilt_deg: float = 45.0,
-    clutter: bool = True,
-    cross_wall: bool = False,
+    side: str | None = None,
+    target_tilt_deg: float | None = None,
+    clutter: bool | None = None,
+    cross_wall: bool | None = None,
     noise: float | None = None,
-    target_offset: float = 0.0,
+    target_offset: float | None = None,
 ) -> Scene:
     """A street (road, kerbs, pavements, facades with gaps; parked cars, trees and poles with
     ``clutter``) scanned by a roof HDL-64E (the reference) and a wide-angle side unit tilted
     ``target_tilt_deg`` down on the ``side`` ("left" or "right"), as on the real road rigs.
     ``target_offset`` (metres, in [-5, 5]) moves the side unit along the vehicle (-3: at the back
-    of a car), where the street's own planes no longer fix its position."""
-    if side not in ("left", "right"):
+    of a car), where the street's own planes no longer fix its position.
+
+    Defaults (Rust ``StreetOptions::default()``): ``side='left'``, ``target_tilt_deg=45``,
+    ``clutter=True``, ``cross_wall=False``, ``target_offset=0``; ``noise`` None is each model's own.
+    """
+    if side is not None and side not in ("left", "right"):
         raise ValueError(f"side must be 'left' or 'right', got {side!r}")
     return sim_street_scene(
         seed=seed,
-        side="left" if side == "left" else "right",
+        side=None if side is None else "left" if side == "left" else "right",
         target_tilt_deg=target_tilt_deg,
         clutter=clutter,
         cross_wall=cross_wall,
@@ -248,10 +273,13 @@ def corridor_scene(seed: int = 0) -> Scene:
     return sim_corridor_scene(seed=seed)
 
 
-def paper_scene(alpha_deg: float = 90.0, configuration: int | None = 1, seed: int = 0) -> Scene:
+def paper_scene(
+    alpha_deg: float | None = None, configuration: int | None = 1, seed: int = 0
+) -> Scene:
     """The planar-surfaces paper's synthetic protocol (9500 sampled points per sensor).
 
     ``configuration`` is 1 or 2 (the paper's Table II) or ``None`` (drawn from ``seed``).
+    Default (Rust ``PaperOptions::default()``): ``alpha_deg=90``.
 
     >>> paper_scene(60.0, 2).reference.shape
     (9500, 4)

@@ -7,7 +7,7 @@
 //! method whose pose is the best's within what the checks detect (the corner method's exact pose
 //! over a targetless one 1 cm away that scores 0.01 higher), and refuses with
 //! [`FailureKind::InconsistentMethods`] when two certified results disagree beyond their tolerance
-//! and their certificates are within [`AUTO_MARGIN`]. A method that fails with
+//! and their certificates are within [`MethodOptions::auto_margin`]. A method that fails with
 //! [`Error::Calibration`] is skipped (its reason and kind are kept for the error when none
 //! succeeds); malformed input is returned at once.
 //!
@@ -57,7 +57,7 @@ pub const AUTO_TIE: f64 = 0.01;
 /// When two methods pass the check but disagree beyond their tolerance, [`Method::Auto`] keeps
 /// the better one only when its certificate score (agreement less violations, both ways) is ahead
 /// by at least this; otherwise it refuses with [`FailureKind::InconsistentMethods`].
-pub const AUTO_MARGIN: f64 = 0.1;
+const AUTO_MARGIN: f64 = 0.1;
 
 /// Which calibration method to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -153,7 +153,10 @@ pub struct MethodOptions {
     pub agreement_distance: f64,
     /// See [`AUTO_TIE`].
     pub auto_tie: f64,
-    /// See [`AUTO_MARGIN`].
+    /// When two methods pass the check but disagree beyond their tolerance, [`Method::Auto`]
+    /// keeps the better one only when its certificate score (agreement less violations, both
+    /// ways) is ahead by at least this (default 0.1); otherwise it refuses with
+    /// [`FailureKind::InconsistentMethods`].
     pub auto_margin: f64,
 }
 

@@ -98,7 +98,7 @@ const THICKNESS_SCALE: f64 = 1.5;
 /// Largest noise scale (metres) the agreement test uses.
 const MAX_NOISE: f64 = 0.1;
 /// Default of [`CheckOptions::max_agreement_gain`].
-pub const MAX_AGREEMENT_GAIN: f64 = 0.08;
+const MAX_AGREEMENT_GAIN: f64 = 0.08;
 /// The local re-alignment's correction (and agreement gain) counts against a pose only when the
 /// re-aligned pose puts at most twice the pose's share of the points, plus this, into free space
 /// (the larger way).

@@ -40,9 +40,9 @@ use crate::geometry::{orthonormal_basis, Line};
 /// Fewest points a cylinder fit accepts.
 pub const MIN_POINTS: usize = 6;
 /// Iteration cap of the Levenberg–Marquardt loop.
-pub const MAX_ITERATIONS: usize = 100;
+const MAX_ITERATIONS: usize = 100;
 /// Stop when a step moves the axis by less than this (metres, or radians times metres of extent).
-pub const STEP_TOLERANCE: f64 = 1e-10;
+const STEP_TOLERANCE: f64 = 1e-10;
 /// Initial Levenberg–Marquardt damping, relative to the largest diagonal entry of `J^T J`.
 const INITIAL_DAMPING: f64 = 1e-6;
 /// Points closer to the axis than this fraction of the radius get no radial direction.
@@ -119,6 +119,15 @@ fn residual_and_jacobian(
     )
 }
 
+/// The quantities the fit moves: a point of the axis (the foot of the points' centroid), the
+/// axis direction and the radius.
+#[derive(Debug, Clone, Copy)]
+struct Axis {
+    p: Point3<f64>,
+    d: Unit<Vector3<f64>>,
+    r: f64,
+}
+
 /// Fits a cylinder to `points` on its surface, starting from `initial` (typically the
 /// [`fit_line`](super::fit_line) of the points) and `viewpoint` (the sensor that saw them).
 ///
@@ -133,6 +142,68 @@ pub fn fit_cylinder(
     initial: &Line,
     viewpoint: &Point3<f64>,
 ) -> Result<CylinderFit> {
+    check_input(points, radius, initial, viewpoint)?;
+    let centroid = Point3::from(
+        points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / points.len() as f64,
+    );
+    let mut axis = start(points, radius, initial, viewpoint, &centroid)?;
+    let estimate_radius = radius.is_none();
+    let mut current = cost(points, &axis.p, &axis.d, axis.r);
+    let mut lambda = None;
+    let mut iterations = 0;
+    let mut converged = false;
+    for _ in 0..MAX_ITERATIONS {
+        let basis = orthonormal_basis(&axis.d);
+        let (mut h, mut g) = normal_equations(points, &axis.p, &axis.d, axis.r, &basis);
+        if !estimate_radius {
+            h.row_mut(4).fill(0.0);
+            h.column_mut(4).fill(0.0);
+            h[(4, 4)] = 1.0;
+            g[4] = 0.0;
+        }
+        let scale = h.diagonal().max().max(f64::MIN_POSITIVE);
+        let mu = lambda.unwrap_or(INITIAL_DAMPING * scale);
+        let (accepted, mu) = damped_step(points, &centroid, &axis, current, (&h, &g), &basis, mu);
+        lambda = Some(mu);
+        let Some((next, c, step_size)) = accepted else {
+            // No descent direction left: at a minimum up to rounding.
+            converged = true;
+            break;
+        };
+        axis = next;
+        current = c;
+        iterations += 1;
+        if step_size < STEP_TOLERANCE {
+            converged = true;
+            break;
+        }
+    }
+    if !(current.is_finite() && axis.r.is_finite()) {
+        return Err(Error::Numerical("cylinder fit diverged".into()));
+    }
+    let line = Line::new(axis.p, axis.d.into_inner())?;
+    let line = if line.direction.dot(&initial.direction) < 0.0 {
+        line.reversed()
+    } else {
+        line
+    };
+    Ok(CylinderFit {
+        axis: line,
+        radius: axis.r,
+        rms: (current / points.len() as f64).sqrt(),
+        iterations,
+        converged,
+    })
+}
+
+/// The input errors of [`fit_cylinder`]: too few or non-finite points, a non-finite initial line
+/// or viewpoint, a radius that is not positive.
+fn check_input(
+    points: &[Point3<f64>],
+    radius: Option<f64>,
+    initial: &Line,
+    viewpoint: &Point3<f64>,
+) -> Result<()> {
     if points.len() < MIN_POINTS {
         return Err(Error::InvalidInput(format!(
             "a cylinder fit needs at least {MIN_POINTS} points, got {}",
@@ -156,11 +227,21 @@ pub fn fit_cylinder(
             )));
         }
     }
-    let centroid = Point3::from(
-        points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / points.len() as f64,
-    );
-    let mut d = initial.direction;
-    let foot = recenter(&initial.point, &d, &centroid);
+    Ok(())
+}
+
+/// The start of the fit: `initial` moved through the foot of `centroid` and shifted away from
+/// `viewpoint` by the radius (the given one, or half the points' spread across the viewing
+/// direction).
+fn start(
+    points: &[Point3<f64>],
+    radius: Option<f64>,
+    initial: &Line,
+    viewpoint: &Point3<f64>,
+    centroid: &Point3<f64>,
+) -> Result<Axis> {
+    let d = initial.direction;
+    let foot = recenter(&initial.point, &d, centroid);
     // Unit vector from the viewpoint toward the axis, orthogonal to it.
     let to_axis = foot - viewpoint;
     let away = to_axis - d.into_inner() * to_axis.dot(&d);
@@ -171,7 +252,7 @@ pub fn fit_cylinder(
         ));
     }
     let away = away / away_norm;
-    let mut r = match radius {
+    let r = match radius {
         Some(r) => r,
         None => {
             let across = d.cross(&away);
@@ -190,84 +271,57 @@ pub fn fit_cylinder(
             r0
         }
     };
-    let estimate_radius = radius.is_none();
-    let mut p = foot + away * r;
-    let mut current = cost(points, &p, &d, r);
-    let mut lambda = None;
-    let mut iterations = 0;
-    let mut converged = false;
-    for _ in 0..MAX_ITERATIONS {
-        let basis = orthonormal_basis(&d);
-        let (mut h, mut g) = normal_equations(points, &p, &d, r, &basis);
-        if !estimate_radius {
-            h.row_mut(4).fill(0.0);
-            h.column_mut(4).fill(0.0);
-            h[(4, 4)] = 1.0;
-            g[4] = 0.0;
-        }
-        let scale = h.diagonal().max().max(f64::MIN_POSITIVE);
-        let mut mu = lambda.unwrap_or(INITIAL_DAMPING * scale);
-        let mut accepted = false;
-        let mut step_size = 0.0;
-        for _ in 0..32 {
-            let mut damped = h;
-            for i in 0..5 {
-                damped[(i, i)] += mu * h[(i, i)].max(1e-12 * scale);
-            }
-            let Some(step) = damped.cholesky().map(|c| c.solve(&-g)) else {
-                mu *= 10.0;
-                continue;
-            };
-            let (b1, b2) = basis;
-            let p_new = p + b1 * step[0] + b2 * step[1];
-            let d_new = Unit::new_normalize(d.into_inner() + b1 * step[2] + b2 * step[3]);
-            let r_new = r + step[4];
-            if r_new.is_nan() || r_new <= 0.0 {
-                mu *= 10.0;
-                continue;
-            }
-            let p_new = recenter(&p_new, &d_new, &centroid);
-            let c = cost(points, &p_new, &d_new, r_new);
-            if c.is_finite() && c <= current {
-                step_size = step.norm();
-                p = p_new;
-                d = d_new;
-                r = r_new;
-                current = c;
-                accepted = true;
-                mu = (mu / 3.0).max(1e-15 * scale);
-                break;
-            }
-            mu *= 10.0;
-        }
-        lambda = Some(mu);
-        if !accepted {
-            // No descent direction left: at a minimum up to rounding.
-            converged = true;
-            break;
-        }
-        iterations += 1;
-        if step_size < STEP_TOLERANCE {
-            converged = true;
-            break;
-        }
-    }
-    if !(current.is_finite() && r.is_finite()) {
-        return Err(Error::Numerical("cylinder fit diverged".into()));
-    }
-    let axis = Line::new(p, d.into_inner())?;
-    let axis = if axis.direction.dot(&initial.direction) < 0.0 {
-        axis.reversed()
-    } else {
-        axis
-    };
-    Ok(CylinderFit {
-        axis,
-        radius: r,
-        rms: (current / points.len() as f64).sqrt(),
-        iterations,
-        converged,
+    Ok(Axis {
+        p: foot + away * r,
+        d,
+        r,
     })
+}
+
+/// One Levenberg–Marquardt iteration from `at` (cost `current`) with the normal equations
+/// `(h, g)` in the tangent `basis` of `at.d`: the damping `mu` grows tenfold until a step lowers
+/// the cost (at most 32 tries). Returns the accepted axis with its cost and step norm, if any, and
+/// the damping to start the next iteration from.
+fn damped_step(
+    points: &[Point3<f64>],
+    centroid: &Point3<f64>,
+    at: &Axis,
+    current: f64,
+    (h, g): (&Matrix5<f64>, &Vector5<f64>),
+    basis: &(Vector3<f64>, Vector3<f64>),
+    mut mu: f64,
+) -> (Option<(Axis, f64, f64)>, f64) {
+    let scale = h.diagonal().max().max(f64::MIN_POSITIVE);
+    for _ in 0..32 {
+        let mut damped = *h;
+        for i in 0..5 {
+            damped[(i, i)] += mu * h[(i, i)].max(1e-12 * scale);
+        }
+        let Some(step) = damped.cholesky().map(|c| c.solve(&-g)) else {
+            mu *= 10.0;
+            continue;
+        };
+        let (b1, b2) = basis;
+        let p_new = at.p + b1 * step[0] + b2 * step[1];
+        let d_new = Unit::new_normalize(at.d.into_inner() + b1 * step[2] + b2 * step[3]);
+        let r_new = at.r + step[4];
+        if r_new.is_nan() || r_new <= 0.0 {
+            mu *= 10.0;
+            continue;
+        }
+        let p_new = recenter(&p_new, &d_new, centroid);
+        let c = cost(points, &p_new, &d_new, r_new);
+        if c.is_finite() && c <= current {
+            let next = Axis {
+                p: p_new,
+                d: d_new,
+                r: r_new,
+            };
+            return (Some((next, c, step.norm())), (mu / 3.0).max(1e-15 * scale));
+        }
+        mu *= 10.0;
+    }
+    (None, mu)
 }
 
 #[cfg(test)]

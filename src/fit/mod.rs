@@ -25,7 +25,7 @@ use crate::geometry::{Line, Plane};
 /// Below this ratio of the middle to the largest scatter eigenvalue, points are called collinear
 /// (no plane is determined); below it for the largest eigenvalue relative to the squared extent
 /// scale, coincident (no line).
-pub const DEGENERACY_RATIO: f64 = 1e-12;
+const DEGENERACY_RATIO: f64 = 1e-12;
 
 /// Count, mean and scatter of a point set.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -115,143 +115,45 @@ fn parse_count(key: &str, v: &str) -> Result<usize> {
         .map_err(|_| bad(format!("{key} {v:?} is not a non-negative integer")))
 }
 
-/// Parses the header up to and including the `DATA` line.
-fn parse_header(bytes: &[u8]) -> Result<Header> {
-    let window = &bytes[..bytes.len().min(MAX_HEADER_BYTES)];
-    let mut names: Option<Vec<String>> = None;
-    let mut sizes: Option<Vec<String>> = None;
-    let mut types: Option<Vec<String>> = None;
-    let mut counts: Option<Vec<usize>> = None;
-    let (mut width, mut height, mut points) = (None, None, None);
-    let mut pos = 0usize;
-    while pos < window.len() {
-        let end = window[pos..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map(|i| pos + i)
-            .ok_or_else(|| {
-                bad(if bytes.len() > MAX_HEADER_BYTES {
-                    "no DATA line in the first 64 KiB: not a PCD file".to_string()
-                } else {
-                    "the header ends before its DATA line (not a PCD file, or truncated)"
-                        .to_string()
-                })
-            })?;
-        let line = std::str::from_utf8(&window[pos..end])
-            .map_err(|_| bad("the header is not text: not a PCD file"))?
-            .trim();
-        pos = end + 1;
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let mut parts = line.split_whitespace();
-        let key = parts.next().unwrap_or_default().to_ascii_uppercase();
-        let values: Vec<&str> = parts.collect();
+/// The header's lines as read, before they are checked against each other.
+#[derive(Default)]
+struct RawHeader {
+    names: Option<Vec<String>>,
+    sizes: Option<Vec<String>>,
+    types: Option<Vec<String>>,
+    counts: Option<Vec<usize>>,
+    width: Option<usize>,
+    height: Option<usize>,
+    points: Option<usize>,
+}
+
+impl RawHeader {
+    /// Records one header line other than `DATA`: its upper-cased `key` and its `values`.
+    fn read(&mut self, key: &str, values: &[&str], line: &str) -> Result<()> {
         let one = || -> Result<usize> {
-            match values.as_slice() {
-                [v] => parse_count(&key, v),
+            match values {
+                [v] => parse_count(key, v),
                 _ => Err(bad(format!("{key} needs one value, got {values:?}"))),
             }
         };
-        match key.as_str() {
+        match key {
             "VERSION" | "VIEWPOINT" => {}
-            "FIELDS" | "COLUMNS" => names = Some(values.iter().map(|s| s.to_string()).collect()),
-            "SIZE" => sizes = Some(values.iter().map(|s| s.to_string()).collect()),
-            "TYPE" => types = Some(values.iter().map(|s| s.to_ascii_uppercase()).collect()),
+            "FIELDS" | "COLUMNS" => {
+                self.names = Some(values.iter().map(|s| s.to_string()).collect())
+            }
+            "SIZE" => self.sizes = Some(values.iter().map(|s| s.to_string()).collect()),
+            "TYPE" => self.types = Some(values.iter().map(|s| s.to_ascii_uppercase()).collect()),
             "COUNT" => {
-                counts = Some(
+                self.counts = Some(
                     values
                         .iter()
                         .map(|v| parse_count("COUNT", v))
                         .collect::<Result<_>>()?,
                 )
             }
-            "WIDTH" => width = Some(one()?),
-            "HEIGHT" => height = Some(one()?),
-            "POINTS" => points = Some(one()?),
-            "DATA" => {
-                let format = match values.first().map(|v| v.to_ascii_lowercase()).as_deref() {
-                    Some("ascii") => PcdFormat::Ascii,
-                    Some("binary") => PcdFormat::Binary,
-                    Some("binary_compressed") => PcdFormat::BinaryCompressed,
-                    other => {
-                        return Err(bad(format!(
-                            "DATA {:?}: expected ascii, binary or binary_compressed",
-                            other.unwrap_or("")
-                        )))
-                    }
-                };
-                let names = names.ok_or_else(|| bad("the header has no FIELDS line"))?;
-                let sizes = sizes.ok_or_else(|| bad("the header has no SIZE line"))?;
-                let types = types.ok_or_else(|| bad("the header has no TYPE line"))?;
-                let counts = counts.unwrap_or_else(|| vec![1; names.len()]);
-                if names.is_empty() {
-                    return Err(bad("FIELDS is empty"));
-                }
-                if sizes.len() != names.len()
-                    || types.len() != names.len()
-                    || counts.len() != names.len()
-                {
-                    return Err(bad(format!(
-                        "FIELDS, SIZE, TYPE and COUNT have different lengths ({}, {}, {}, {})",
-                        names.len(),
-                        sizes.len(),
-                        types.len(),
-                        counts.len()
-                    )));
-                }
-                // Each element of a field becomes a column; bound them before anything is
-                // allocated per column (a corrupt COUNT once asked for 2e18 column names).
-                let values: usize = counts.iter().fold(0usize, |a, &c| a.saturating_add(c));
-                if values > MAX_VALUES_PER_POINT {
-                    return Err(bad(format!(
-                        "COUNT declares {values} values per point (at most \
-                         {MAX_VALUES_PER_POINT}): the header is corrupt"
-                    )));
-                }
-                let mut fields = Vec::with_capacity(names.len());
-                for (((name, size), kind), count) in
-                    names.iter().zip(&sizes).zip(&types).zip(counts)
-                {
-                    let s = scalar(kind, size).ok_or_else(|| {
-                        bad(format!(
-                            "field {name:?} has TYPE {kind} SIZE {size}, which PCD does not define"
-                        ))
-                    })?;
-                    if count == 0 {
-                        return Err(bad(format!("field {name:?} has COUNT 0")));
-                    }
-                    fields.push(Field {
-                        name: name.clone(),
-                        scalar: s,
-                        count,
-                    });
-                }
-                let from_dims = match (width, height) {
-                    (Some(w), Some(h)) => Some(
-                        w.checked_mul(h)
-                            .ok_or_else(|| bad("WIDTH x HEIGHT overflows"))?,
-                    ),
-                    (Some(w), None) => Some(w),
-                    _ => None,
-                };
-                let points = match (points, from_dims) {
-                    (Some(p), Some(d)) if p != d => {
-                        return Err(bad(format!(
-                            "POINTS {p} disagrees with WIDTH x HEIGHT = {d}"
-                        )))
-                    }
-                    (Some(p), _) => p,
-                    (None, Some(d)) => d,
-                    (None, None) => return Err(bad("the header has neither POINTS nor WIDTH")),
-                };
-                return Ok(Header {
-                    fields,
-                    points,
-                    format,
-                    data_start: pos,
-                });
-            }
+            "WIDTH" => self.width = Some(one()?),
+            "HEIGHT" => self.height = Some(one()?),
+            "POINTS" => self.points = Some(one()?),
             _ => {
                 return Err(bad(format!(
                     "unknown header line {:?}: not a PCD v0.7 file",
@@ -259,6 +161,142 @@ fn parse_header(bytes: &[u8]) -> Result<Header> {
                 )))
             }
         }
+        Ok(())
+    }
+
+    /// The fields from FIELDS, SIZE, TYPE and COUNT, checked against each other.
+    fn fields(&self) -> Result<Vec<Field>> {
+        let names = self
+            .names
+            .as_ref()
+            .ok_or_else(|| bad("the header has no FIELDS line"))?;
+        let sizes = self
+            .sizes
+            .as_ref()
+            .ok_or_else(|| bad("the header has no SIZE line"))?;
+        let types = self
+            .types
+            .as_ref()
+            .ok_or_else(|| bad("the header has no TYPE line"))?;
+        let counts = self.counts.clone().unwrap_or_else(|| vec![1; names.len()]);
+        if names.is_empty() {
+            return Err(bad("FIELDS is empty"));
+        }
+        if sizes.len() != names.len() || types.len() != names.len() || counts.len() != names.len() {
+            return Err(bad(format!(
+                "FIELDS, SIZE, TYPE and COUNT have different lengths ({}, {}, {}, {})",
+                names.len(),
+                sizes.len(),
+                types.len(),
+                counts.len()
+            )));
+        }
+        // Each element of a field becomes a column; bound them before anything is allocated per
+        // column (a corrupt COUNT once asked for 2e18 column names).
+        let values: usize = counts.iter().fold(0usize, |a, &c| a.saturating_add(c));
+        if values > MAX_VALUES_PER_POINT {
+            return Err(bad(format!(
+                "COUNT declares {values} values per point (at most \
+                 {MAX_VALUES_PER_POINT}): the header is corrupt"
+            )));
+        }
+        let mut fields = Vec::with_capacity(names.len());
+        for (((name, size), kind), count) in names.iter().zip(sizes).zip(types).zip(counts) {
+            let s = scalar(kind, size).ok_or_else(|| {
+                bad(format!(
+                    "field {name:?} has TYPE {kind} SIZE {size}, which PCD does not define"
+                ))
+            })?;
+            if count == 0 {
+                return Err(bad(format!("field {name:?} has COUNT 0")));
+            }
+            fields.push(Field {
+                name: name.clone(),
+                scalar: s,
+                count,
+            });
+        }
+        Ok(fields)
+    }
+
+    /// The number of points from POINTS and WIDTH x HEIGHT, which must agree when both are given.
+    fn points(&self) -> Result<usize> {
+        let from_dims = match (self.width, self.height) {
+            (Some(w), Some(h)) => Some(
+                w.checked_mul(h)
+                    .ok_or_else(|| bad("WIDTH x HEIGHT overflows"))?,
+            ),
+            (Some(w), None) => Some(w),
+            _ => None,
+        };
+        match (self.points, from_dims) {
+            (Some(p), Some(d)) if p != d => Err(bad(format!(
+                "POINTS {p} disagrees with WIDTH x HEIGHT = {d}"
+            ))),
+            (Some(p), _) => Ok(p),
+            (None, Some(d)) => Ok(d),
+            (None, None) => Err(bad("the header has neither POINTS nor WIDTH")),
+        }
+    }
+}
+
+/// The encoding named by the `DATA` line.
+fn data_format(values: &[&str]) -> Result<PcdFormat> {
+    match values.first().map(|v| v.to_ascii_lowercase()).as_deref() {
+        Some("ascii") => Ok(PcdFormat::Ascii),
+        Some("binary") => Ok(PcdFormat::Binary),
+        Some("binary_compressed") => Ok(PcdFormat::BinaryCompressed),
+        other => Err(bad(format!(
+            "DATA {:?}: expected ascii, binary or binary_compressed",
+            other.unwrap_or("")
+        ))),
+    }
+}
+
+/// The header line starting at `pos` of `window` (the first bytes of the file, `bytes`), trimmed,
+/// and where the next one starts.
+fn header_line<'a>(bytes: &[u8], window: &'a [u8], pos: usize) -> Result<(&'a str, usize)> {
+    let end = window[pos..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map(|i| pos + i)
+        .ok_or_else(|| {
+            bad(if bytes.len() > MAX_HEADER_BYTES {
+                "no DATA line in the first 64 KiB: not a PCD file".to_string()
+            } else {
+                "the header ends before its DATA line (not a PCD file, or truncated)".to_string()
+            })
+        })?;
+    let line = std::str::from_utf8(&window[pos..end])
+        .map_err(|_| bad("the header is not text: not a PCD file"))?
+        .trim();
+    Ok((line, end + 1))
+}
+
+/// Parses the header up to and including the `DATA` line.
+fn parse_header(bytes: &[u8]) -> Result<Header> {
+    let window = &bytes[..bytes.len().min(MAX_HEADER_BYTES)];
+    let mut raw = RawHeader::default();
+    let mut pos = 0usize;
+    while pos < window.len() {
+        let (line, next) = header_line(bytes, window, pos)?;
+        pos = next;
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut parts = line.split_whitespace();
+        let key = parts.next().unwrap_or_default().to_ascii_uppercase();
+        let values: Vec<&str> = parts.collect();
+        if key == "DATA" {
+            let format = data_format(&values)?;
+            return Ok(Header {
+                fields: raw.fields()?,
+                points: raw.points()?,
+                format,
+                data_start: pos,
+            });
+        }
+        raw.read(&key, &values, line)?;
     }
     Err(bad(
         "the header ends before its DATA line (not a PCD file, or truncated)",

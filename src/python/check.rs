@@ -4,8 +4,10 @@ use nalgebra::Vector3;
 use numpy::ndarray::Ix1;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use super::arrays::{self, to_numpy};
+use super::defaults::table;
 use super::result::matrix4;
 use super::run;
 use crate::check::{check as rs_check, CheckOptions, CheckReport as Report};
@@ -178,8 +180,9 @@ impl CheckReport {
 ///
 /// reference, target: (N, 3) or (N, 4) clouds in their sensors' frames.
 /// transform: (4, 4) reference_from_target (p_ref = R @ p_tgt + t), from any source.
-/// noise: range noise in metres (1 sigma), or None to measure it. The other keywords override
-///     the defaults of the Rust `CheckOptions`.
+/// noise: range noise in metres (1 sigma), or None to measure it. The other keywords left None
+///     take the Rust `CheckOptions::default()`: voxel_size=0.1, samples=4000,
+///     rotation_tolerance_deg=0.5, translation_tolerance_m=0.06.
 /// Returns a CheckReport; raises ValueError for malformed input (an inconsistent or
 /// unverifiable transform is a verdict, not an exception).
 #[pyfunction]
@@ -212,6 +215,17 @@ pub(crate) fn check(
     };
     let inner = run(py, move || rs_check(&reference, &target, &pose, &options))?;
     Ok(CheckReport { inner })
+}
+
+/// The Rust defaults behind `check`'s keywords (see `super::defaults`).
+pub(crate) fn defaults(out: &Bound<'_, PyDict>) -> PyResult<()> {
+    let o = CheckOptions::default();
+    let t = table(out, "check")?;
+    t.set_item("voxel_size", o.voxel_size)?;
+    t.set_item("samples", o.samples)?;
+    t.set_item("rotation_tolerance_deg", o.rotation_tolerance.to_degrees())?;
+    t.set_item("translation_tolerance_m", o.translation_tolerance)?;
+    Ok(())
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

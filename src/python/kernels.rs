@@ -6,9 +6,10 @@ use numpy::ndarray::{Ix1, Ix2, Ix3};
 use numpy::{PyArray1, PyArray2, PyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PySequence;
+use pyo3::types::{PyDict, PySequence};
 
 use super::arrays::{self, row_major, to_numpy};
+use super::defaults::table;
 use super::run;
 use crate::geometry::{self, Line, Plane};
 use crate::lm::{self, LmOptions, LmReport, Loss};
@@ -129,12 +130,14 @@ fn frame_arg(name: &str) -> PyResult<Frame> {
     }
 }
 
-fn loss_arg(name: &str, scale: f64) -> PyResult<Loss> {
+/// A `loss` name and its scale; None is the Rust `Loss::default()`.
+fn loss_arg(name: Option<&str>, scale: f64) -> PyResult<Loss> {
     let loss = match name {
-        "squared" | "linear" => Loss::Squared,
-        "huber" => Loss::Huber { delta: scale },
-        "cauchy" => Loss::Cauchy { scale },
-        other => {
+        None => Loss::default(),
+        Some("squared" | "linear") => Loss::Squared,
+        Some("huber") => Loss::Huber { delta: scale },
+        Some("cauchy") => Loss::Cauchy { scale },
+        Some(other) => {
             return Err(PyValueError::new_err(format!(
                 "loss must be 'squared', 'huber' or 'cauchy', got {other:?}"
             )))
@@ -257,10 +260,21 @@ impl RefineResult {
     }
 }
 
-fn lm_options(max_iterations: usize) -> LmOptions {
+/// The name `loss_arg` reads a loss by.
+fn loss_name(loss: Loss) -> &'static str {
+    match loss {
+        Loss::Squared => "squared",
+        Loss::Huber { .. } => "huber",
+        Loss::Cauchy { .. } => "cauchy",
+    }
+}
+
+/// The LM options of the refine functions: `LmOptions::default()` with their `max_iterations`.
+fn lm_options(max_iterations: Option<usize>) -> LmOptions {
+    let d = LmOptions::default();
     LmOptions {
-        max_iterations,
-        ..LmOptions::default()
+        max_iterations: max_iterations.unwrap_or(d.max_iterations),
+        ..d
     }
 }
 
@@ -271,8 +285,10 @@ fn lm_options(max_iterations: usize) -> LmOptions {
 /// frames: K strings; "target" (default) means points[k] are in the target frame and planes[k] in
 ///     the reference frame, "reference" the opposite. Mixing both gives the symmetric cost.
 /// loss: "squared", "huber" or "cauchy"; loss_scale is the robust scale in metres.
+/// Left None, loss and max_iterations take the Rust `Loss::default()` and `LmOptions::default()`:
+/// loss='squared', max_iterations=100.
 #[pyfunction]
-#[pyo3(signature = (planes, points, initial_transform=None, *, frames=None, loss="squared", loss_scale=0.1, max_iterations=100))]
+#[pyo3(signature = (planes, points, initial_transform=None, *, frames=None, loss=None, loss_scale=0.1, max_iterations=None))]
 #[allow(clippy::too_many_arguments)]
 fn refine_point_to_plane(
     py: Python<'_>,
@@ -280,9 +296,9 @@ fn refine_point_to_plane(
     points: &Bound<'_, PyAny>,
     initial_transform: Option<&Bound<'_, PyAny>>,
     frames: Option<Vec<String>>,
-    loss: &str,
+    loss: Option<&str>,
     loss_scale: f64,
-    max_iterations: usize,
+    max_iterations: Option<usize>,
 ) -> PyResult<RefineResult> {
     let planes = arrays::rows(planes, "planes", 4)?
         .iter()
@@ -322,7 +338,7 @@ impl RefineArgs {
         count: usize,
         initial_transform: Option<&Bound<'_, PyAny>>,
         frames: Option<Vec<String>>,
-        loss: &str,
+        loss: Option<&str>,
         loss_scale: f64,
     ) -> PyResult<Self> {
         Ok(RefineArgs {
@@ -339,7 +355,7 @@ fn refine<T, P, B>(
     py: Python<'_>,
     args: RefineArgs,
     features: Vec<T>,
-    max_iterations: usize,
+    max_iterations: Option<usize>,
     build: B,
 ) -> PyResult<RefineResult>
 where
@@ -378,9 +394,10 @@ pub(crate) fn line_from_row(row: &[f64]) -> crate::Result<Line> {
 /// Levenberg–Marquardt refinement of reference_from_target from point-to-line distances.
 ///
 /// lines: (K, 6) rows [px, py, pz, dx, dy, dz] (a point and a direction).
-/// points, frames, loss: as in refine_point_to_plane.
+/// points, frames, loss, max_iterations: as in refine_point_to_plane (left None: loss='squared',
+/// max_iterations=100, the Rust defaults).
 #[pyfunction]
-#[pyo3(signature = (lines, points, initial_transform=None, *, frames=None, loss="squared", loss_scale=0.1, max_iterations=100))]
+#[pyo3(signature = (lines, points, initial_transform=None, *, frames=None, loss=None, loss_scale=0.1, max_iterations=None))]
 #[allow(clippy::too_many_arguments)]
 fn refine_point_to_line(
     py: Python<'_>,
@@ -388,9 +405,9 @@ fn refine_point_to_line(
     points: &Bound<'_, PyAny>,
     initial_transform: Option<&Bound<'_, PyAny>>,
     frames: Option<Vec<String>>,
-    loss: &str,
+    loss: Option<&str>,
     loss_scale: f64,
-    max_iterations: usize,
+    max_iterations: Option<usize>,
 ) -> PyResult<RefineResult> {
     let lines = arrays::rows(lines, "lines", 6)?
         .iter()
@@ -490,6 +507,16 @@ fn point_to_line_residuals<'py>(
         .flat_map(|(_, j)| j.iter().flat_map(|row| row.iter().copied()))
         .collect();
     Ok((to_numpy(py, Ix2(n, 2), r)?, to_numpy(py, Ix3(n, 2, 6), j)?))
+}
+
+/// The Rust defaults behind this file's keywords (see `super::defaults`).
+pub(crate) fn defaults(out: &Bound<'_, PyDict>) -> PyResult<()> {
+    for name in ["refine_point_to_plane", "refine_point_to_line"] {
+        let t = table(out, name)?;
+        t.set_item("loss", loss_name(Loss::default()))?;
+        t.set_item("max_iterations", LmOptions::default().max_iterations)?;
+    }
+    Ok(())
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

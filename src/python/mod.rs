@@ -16,6 +16,7 @@ use crate::Error;
 mod arrays;
 mod calib;
 mod check;
+mod defaults;
 mod io;
 mod kernels;
 mod ransac;
@@ -109,5 +110,6 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     check::register(m)?;
     sim::register(m)?;
+    defaults::register(m)?;
     Ok(())
 }

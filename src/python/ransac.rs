@@ -5,8 +5,10 @@ use nalgebra::{Point3, Vector3, Vector4};
 use numpy::ndarray::Ix1;
 use numpy::PyArray1;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use super::arrays::{self, to_numpy};
+use super::defaults::table;
 use super::run;
 use crate::geometry::{Line, Plane};
 use crate::ransac::consensus::{score_models, Score};
@@ -126,12 +128,20 @@ impl PyLine {
     }
 }
 
-fn options(threshold: f64, confidence: f64, max_iterations: usize, seed: u64) -> RansacOptions {
+/// RANSAC options with `threshold`; `confidence` and `max_iterations` left None take the Rust
+/// defaults of `RansacOptions::new`.
+fn options(
+    threshold: f64,
+    confidence: Option<f64>,
+    max_iterations: Option<usize>,
+    seed: u64,
+) -> RansacOptions {
+    let d = RansacOptions::new(threshold);
     RansacOptions {
-        confidence,
-        max_iterations,
+        confidence: confidence.unwrap_or(d.confidence),
+        max_iterations: max_iterations.unwrap_or(d.max_iterations),
         seed,
-        ..RansacOptions::new(threshold)
+        ..d
     }
 }
 
@@ -143,14 +153,16 @@ fn options(threshold: f64, confidence: f64, max_iterations: usize, seed: u64) ->
 /// confidence: stop once an all-inlier sample was drawn with this probability.
 /// max_iterations: cap on hypotheses. seed: the sampler's seed (same seed, same answer, any
 /// thread count).
+/// Left None, confidence and max_iterations take the Rust `RansacOptions::new` defaults:
+/// confidence=0.999, max_iterations=10000.
 #[pyfunction]
-#[pyo3(signature = (points, distance_threshold, *, confidence=0.999, max_iterations=10_000, seed=0))]
+#[pyo3(signature = (points, distance_threshold, *, confidence=None, max_iterations=None, seed=0))]
 fn ransac_plane(
     py: Python<'_>,
     points: &Bound<'_, PyAny>,
     distance_threshold: f64,
-    confidence: f64,
-    max_iterations: usize,
+    confidence: Option<f64>,
+    max_iterations: Option<usize>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<PyPlane> {
     let points = arrays::points(points, "points")?;
@@ -165,14 +177,16 @@ fn ransac_plane(
 }
 
 /// The line with the most support among `points`, by RANSAC (see `ransac_plane`). N >= 2.
+/// Left None, confidence and max_iterations take the Rust `RansacOptions::new` defaults:
+/// confidence=0.999, max_iterations=10000.
 #[pyfunction]
-#[pyo3(signature = (points, distance_threshold, *, confidence=0.999, max_iterations=10_000, seed=0))]
+#[pyo3(signature = (points, distance_threshold, *, confidence=None, max_iterations=None, seed=0))]
 fn ransac_line(
     py: Python<'_>,
     points: &Bound<'_, PyAny>,
     distance_threshold: f64,
-    confidence: f64,
-    max_iterations: usize,
+    confidence: Option<f64>,
+    max_iterations: Option<usize>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<PyLine> {
     let points = arrays::points(points, "points")?;
@@ -194,26 +208,30 @@ fn ransac_line(
 /// accepted normals, is discarded (its points leave the pool) and the search goes on, so the
 /// planes found are linearly independent (three walls without a floor are not).
 /// Raises CalibrationError when fewer than `count` planes with at least `min_inliers` inliers exist.
+/// Left None, min_inliers and refinement_rounds take the Rust `ExtractOptions::new` defaults and
+/// confidence and max_iterations those of `RansacOptions::new`: min_inliers=50,
+/// refinement_rounds=3, confidence=0.999, max_iterations=10000.
 #[pyfunction]
-#[pyo3(signature = (points, count=3, distance_threshold=0.05, *, min_inliers=50, refinement_rounds=3, min_angle_deg=None, confidence=0.999, max_iterations=10_000, seed=0))]
+#[pyo3(signature = (points, count=3, distance_threshold=0.05, *, min_inliers=None, refinement_rounds=None, min_angle_deg=None, confidence=None, max_iterations=None, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn extract_planes(
     py: Python<'_>,
     points: &Bound<'_, PyAny>,
     count: usize,
     distance_threshold: f64,
-    min_inliers: usize,
-    refinement_rounds: usize,
+    min_inliers: Option<usize>,
+    refinement_rounds: Option<usize>,
     min_angle_deg: Option<f64>,
-    confidence: f64,
-    max_iterations: usize,
+    confidence: Option<f64>,
+    max_iterations: Option<usize>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<Vec<PyPlane>> {
     let points = arrays::points(points, "points")?;
+    let d = ExtractOptions::new(count, distance_threshold);
     let opts = ExtractOptions {
         count,
-        min_inliers,
-        refinement_rounds,
+        min_inliers: min_inliers.unwrap_or(d.min_inliers),
+        refinement_rounds: refinement_rounds.unwrap_or(d.refinement_rounds),
         ransac: options(distance_threshold, confidence, max_iterations, seed),
         min_angle_between: min_angle_deg.map(f64::to_radians),
     };
@@ -307,6 +325,26 @@ fn score_lines<'py>(
         ))
     })?;
     Ok(scores_to_numpy(py, &scores))
+}
+
+/// The Rust defaults behind this file's keywords (see `super::defaults`). The threshold and the
+/// count have no Rust default (`extract_planes`' 3 planes at 0.05 m are this module's own); the
+/// values read here do not depend on them.
+pub(crate) fn defaults(out: &Bound<'_, PyDict>) -> PyResult<()> {
+    let e = ExtractOptions::new(3, 0.05);
+    let ransac = |name| {
+        let t = table(out, name)?;
+        t.set_item("confidence", e.ransac.confidence)?;
+        t.set_item("max_iterations", e.ransac.max_iterations)?;
+        t.set_item("seed", e.ransac.seed)?;
+        PyResult::Ok(t)
+    };
+    ransac("ransac_plane")?;
+    ransac("ransac_line")?;
+    let t = ransac("extract_planes")?;
+    t.set_item("min_inliers", e.min_inliers)?;
+    t.set_item("refinement_rounds", e.refinement_rounds)?;
+    Ok(())
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -5,20 +5,32 @@ use numpy::ndarray::{Array1, Ix1, Ix2};
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PySequence;
+use pyo3::types::{PyDict, PySequence};
 
 use super::arrays::{self, row_major, to_numpy};
+use super::defaults::table;
 use super::run;
 use crate::geometry;
 use crate::sim::scenes::{
     corner_scene, corridor_scene, paper_scene, poles_scene, street_scene, CornerOptions,
-    PaperConfiguration, PaperOptions, PolesOptions, Side, StreetOptions,
+    PaperConfiguration, PaperOptions, PolesOptions, Side, StreetOptions, POLES_RANGE_NOISE,
 };
 use crate::sim::shapes::{self, IntensityRange};
-use crate::sim::{self as core_sim, Scan, ScanOptions};
+use crate::sim::{self as core_sim, BeamSettings, Preset, Scan, ScanOptions};
 
-fn intensity_arg(value: (f64, f64)) -> PyResult<IntensityRange> {
-    Ok(IntensityRange::new(value.0, value.1)?)
+/// The intensity ranges the `Shape` constructors default to.
+const RECTANGLE_INTENSITY: IntensityRange = IntensityRange::WALL;
+const CUBOID_INTENSITY: IntensityRange = IntensityRange::CLUTTER;
+const CYLINDER_INTENSITY: IntensityRange = IntensityRange::POLE;
+const BAND_INTENSITY: IntensityRange = IntensityRange::RETROREFLECTIVE;
+
+/// An `intensity=(min, max)` argument, or `default` for None.
+fn intensity_arg(value: Option<(f64, f64)>, default: IntensityRange) -> PyResult<IntensityRange> {
+    value.map_or(Ok(default), |(min, max)| Ok(IntensityRange::new(min, max)?))
+}
+
+fn intensity_tuple(range: IntensityRange) -> (f64, f64) {
+    (range.min, range.max)
 }
 
 fn pose_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Isometry3<f64>> {
@@ -48,26 +60,28 @@ impl BeamModel {
             inner: core_sim::BeamModel::from_name(name)?,
         })
     }
-    /// A custom model from beam elevations in degrees.
+    /// A custom model from beam elevations in degrees. A setting left None takes the Rust
+    /// `BeamSettings::default()`: columns=1800, min_range=0.5, max_range=100, range_noise=0.01.
     #[staticmethod]
-    #[pyo3(signature = (elevations_deg, *, columns=1800, min_range=0.5, max_range=100.0, range_noise=0.01, name="custom"))]
+    #[pyo3(signature = (elevations_deg, *, columns=None, min_range=None, max_range=None, range_noise=None, name="custom"))]
     fn custom(
         elevations_deg: &Bound<'_, PyAny>,
-        columns: usize,
-        min_range: f64,
-        max_range: f64,
-        range_noise: f64,
+        columns: Option<usize>,
+        min_range: Option<f64>,
+        max_range: Option<f64>,
+        range_noise: Option<f64>,
         name: &str,
     ) -> PyResult<Self> {
         let e = arrays::vector(elevations_deg, "elevations_deg", None)?;
+        let d = BeamSettings::default();
         Ok(BeamModel {
             inner: core_sim::BeamModel::custom(
                 name,
                 &e,
-                columns,
-                min_range,
-                max_range,
-                range_noise,
+                columns.unwrap_or(d.columns),
+                min_range.unwrap_or(d.min_range),
+                max_range.unwrap_or(d.max_range),
+                range_noise.unwrap_or(d.range_noise),
             )?,
         })
     }
@@ -118,10 +132,10 @@ impl BeamModel {
     }
 }
 
-/// A model name or a BeamModel; None is the VLP-16.
+/// A model name or a BeamModel; None is the default preset (the VLP-16).
 fn model_arg(obj: Option<&Bound<'_, PyAny>>) -> PyResult<core_sim::BeamModel> {
     let Some(obj) = obj else {
-        return Ok(core_sim::BeamModel::preset(core_sim::Preset::Vlp16));
+        return Ok(core_sim::BeamModel::preset(Preset::default()));
     };
     if let Ok(m) = obj.cast::<BeamModel>() {
         return Ok(m.get().inner.clone());
@@ -144,13 +158,14 @@ pub(crate) struct Shape {
 #[pymethods]
 impl Shape {
     /// A rectangle corner + s * edge_u + t * edge_v, s, t in [0, 1] (edges orthogonal).
+    /// intensity None is the Rust `IntensityRange::WALL`: intensity=(20, 70).
     #[staticmethod]
-    #[pyo3(signature = (corner, edge_u, edge_v, *, intensity=(20.0, 70.0)))]
+    #[pyo3(signature = (corner, edge_u, edge_v, *, intensity=None))]
     fn rectangle(
         corner: &Bound<'_, PyAny>,
         edge_u: &Bound<'_, PyAny>,
         edge_v: &Bound<'_, PyAny>,
-        intensity: (f64, f64),
+        intensity: Option<(f64, f64)>,
     ) -> PyResult<Self> {
         let r = shapes::Rectangle::new(
             point_arg(corner, "corner")?,
@@ -158,34 +173,37 @@ impl Shape {
             arrays::vector3(edge_v, "edge_v")?,
         )?;
         Ok(Shape {
-            inner: shapes::Shape::rectangle(r, intensity_arg(intensity)?),
+            inner: shapes::Shape::rectangle(r, intensity_arg(intensity, RECTANGLE_INTENSITY)?),
         })
     }
     /// A box of full size (sx, sy, sz) centred at the origin of pose (4x4 world_from_box).
+    /// intensity None is the Rust `IntensityRange::CLUTTER`: intensity=(10, 90).
     #[staticmethod]
-    #[pyo3(signature = (size, pose=None, *, intensity=(10.0, 90.0)))]
+    #[pyo3(signature = (size, pose=None, *, intensity=None))]
     fn cuboid(
         size: &Bound<'_, PyAny>,
         pose: Option<&Bound<'_, PyAny>>,
-        intensity: (f64, f64),
+        intensity: Option<(f64, f64)>,
     ) -> PyResult<Self> {
         let b = shapes::Cuboid::new(pose_arg(pose, "pose")?, arrays::vector3(size, "size")?)?;
         Ok(Shape {
-            inner: shapes::Shape::cuboid(b, intensity_arg(intensity)?),
+            inner: shapes::Shape::cuboid(b, intensity_arg(intensity, CUBOID_INTENSITY)?),
         })
     }
     /// A finite cylinder from its base centre, axis direction, length and radius, with an optional
-    /// band (start, end) in metres from the base returning band_intensity.
+    /// band (start, end) in metres from the base returning band_intensity. None intensities are the
+    /// Rust `IntensityRange::POLE` and `RETROREFLECTIVE`: intensity=(30, 80),
+    /// band_intensity=(235, 255).
     #[staticmethod]
-    #[pyo3(signature = (base, direction, length, radius, *, intensity=(30.0, 80.0), band=None, band_intensity=(235.0, 255.0)))]
+    #[pyo3(signature = (base, direction, length, radius, *, intensity=None, band=None, band_intensity=None))]
     fn cylinder(
         base: &Bound<'_, PyAny>,
         direction: &Bound<'_, PyAny>,
         length: f64,
         radius: f64,
-        intensity: (f64, f64),
+        intensity: Option<(f64, f64)>,
         band: Option<(f64, f64)>,
-        band_intensity: (f64, f64),
+        band_intensity: Option<(f64, f64)>,
     ) -> PyResult<Self> {
         let mut c = shapes::Cylinder::new(
             point_arg(base, "base")?,
@@ -194,10 +212,10 @@ impl Shape {
             radius,
         )?;
         if let Some((start, end)) = band {
-            c = c.with_band(start, end, intensity_arg(band_intensity)?)?;
+            c = c.with_band(start, end, intensity_arg(band_intensity, BAND_INTENSITY)?)?;
         }
         Ok(Shape {
-            inner: shapes::Shape::cylinder(c, intensity_arg(intensity)?),
+            inner: shapes::Shape::cylinder(c, intensity_arg(intensity, CYLINDER_INTENSITY)?),
         })
     }
     /// "rectangle", "cuboid" or "cylinder".
@@ -251,9 +269,9 @@ fn scan_array<'py>(
 }
 
 /// Simulates one revolution; returns (N, 4) [x, y, z, intensity] (or (N, 5) with the ring) in the
-/// sensor frame, ring-major.
+/// sensor frame, ring-major. dropout None is the Rust `ScanOptions::default()`: dropout=0.
 #[pyfunction]
-#[pyo3(signature = (shapes, model=None, sensor_pose=None, *, seed=0, noise=None, dropout=0.0, with_ring=false))]
+#[pyo3(signature = (shapes, model=None, sensor_pose=None, *, seed=0, noise=None, dropout=None, with_ring=false))]
 #[allow(clippy::too_many_arguments)]
 fn sim_scan<'py>(
     py: Python<'py>,
@@ -262,16 +280,17 @@ fn sim_scan<'py>(
     sensor_pose: Option<&Bound<'py, PyAny>>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
     noise: Option<f64>,
-    dropout: f64,
+    dropout: Option<f64>,
     with_ring: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let shapes = shapes_arg(shapes)?;
     let model = model_arg(model)?;
     let pose = pose_arg(sensor_pose, "sensor_pose")?;
+    let d = ScanOptions::default();
     let options = ScanOptions {
         seed,
-        range_noise: noise,
-        dropout,
+        range_noise: noise.or(d.range_noise),
+        dropout: dropout.unwrap_or(d.dropout),
     };
     let scan = run(py, move || core_sim::scan(&model, &shapes, &pose, &options))?;
     scan_array(py, &scan, with_ring)
@@ -392,32 +411,33 @@ impl Scene {
     }
 }
 
-/// The building-corner scene.
+/// The building-corner scene; a keyword left None takes the Rust `CornerOptions::default()`.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, seed=0, clutter_boxes=4, extra_walls=0, noise=None, dropout=0.0, wall_angle_deg=90.0, target_tilt_deg=10.0, target_relative_yaw_deg=None))]
+#[pyo3(signature = (model=None, *, seed=0, clutter_boxes=None, extra_walls=None, noise=None, dropout=None, wall_angle_deg=None, target_tilt_deg=None, target_relative_yaw_deg=None))]
 #[allow(clippy::too_many_arguments)]
 fn sim_corner_scene<'py>(
     py: Python<'py>,
     model: Option<&Bound<'py, PyAny>>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
-    clutter_boxes: usize,
-    extra_walls: usize,
+    clutter_boxes: Option<usize>,
+    extra_walls: Option<usize>,
     noise: Option<f64>,
-    dropout: f64,
-    wall_angle_deg: f64,
-    target_tilt_deg: f64,
+    dropout: Option<f64>,
+    wall_angle_deg: Option<f64>,
+    target_tilt_deg: Option<f64>,
     target_relative_yaw_deg: Option<f64>,
 ) -> PyResult<Scene> {
     let model = model_arg(model)?;
+    let d = CornerOptions::default();
     let options = CornerOptions {
         seed,
-        clutter_boxes,
-        extra_walls,
-        range_noise: noise,
-        dropout,
-        wall_angle_deg,
-        target_tilt_deg,
-        target_relative_yaw_deg,
+        clutter_boxes: clutter_boxes.unwrap_or(d.clutter_boxes),
+        extra_walls: extra_walls.unwrap_or(d.extra_walls),
+        range_noise: noise.or(d.range_noise),
+        dropout: dropout.unwrap_or(d.dropout),
+        wall_angle_deg: wall_angle_deg.unwrap_or(d.wall_angle_deg),
+        target_tilt_deg: target_tilt_deg.unwrap_or(d.target_tilt_deg),
+        target_relative_yaw_deg: target_relative_yaw_deg.or(d.target_relative_yaw_deg),
     };
     let inner = run(py, move || corner_scene(&model, &options))?;
     Ok(Scene {
@@ -426,38 +446,47 @@ fn sim_corner_scene<'py>(
     })
 }
 
-/// The street scene: a roof HDL-64E (reference) and a tilted wide-angle side unit (target).
+fn side_name(side: Side) -> &'static str {
+    match side {
+        Side::Left => "left",
+        Side::Right => "right",
+    }
+}
+
+/// The street scene: a roof HDL-64E (reference) and a tilted wide-angle side unit (target); a
+/// keyword left None takes the Rust `StreetOptions::default()`.
 // One argument per keyword of `lidarcal.sim.street_scene`.
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
-#[pyo3(signature = (*, seed=0, side="left", target_tilt_deg=45.0, clutter=true, cross_wall=false, noise=None, target_offset=0.0))]
+#[pyo3(signature = (*, seed=0, side=None, target_tilt_deg=None, clutter=None, cross_wall=None, noise=None, target_offset=None))]
 fn sim_street_scene(
     py: Python<'_>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
-    side: &str,
-    target_tilt_deg: f64,
-    clutter: bool,
-    cross_wall: bool,
+    side: Option<&str>,
+    target_tilt_deg: Option<f64>,
+    clutter: Option<bool>,
+    cross_wall: Option<bool>,
     noise: Option<f64>,
-    target_offset: f64,
+    target_offset: Option<f64>,
 ) -> PyResult<Scene> {
+    let d = StreetOptions::default();
     let side = match side {
-        "left" => Side::Left,
-        "right" => Side::Right,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "side must be 'left' or 'right', got {other:?}"
-            )))
-        }
+        None => d.side,
+        Some(name) => [Side::Left, Side::Right]
+            .into_iter()
+            .find(|s| side_name(*s) == name)
+            .ok_or_else(|| {
+                PyValueError::new_err(format!("side must be 'left' or 'right', got {name:?}"))
+            })?,
     };
     let options = StreetOptions {
         seed,
         side,
-        target_tilt_deg,
-        clutter,
-        cross_wall,
-        range_noise: noise,
-        target_offset,
+        target_tilt_deg: target_tilt_deg.unwrap_or(d.target_tilt_deg),
+        clutter: clutter.unwrap_or(d.clutter),
+        cross_wall: cross_wall.unwrap_or(d.cross_wall),
+        range_noise: noise.or(d.range_noise),
+        target_offset: target_offset.unwrap_or(d.target_offset),
     };
     let inner = run(py, move || street_scene(&options))?;
     Ok(Scene {
@@ -480,32 +509,34 @@ fn sim_corridor_scene(
     })
 }
 
-/// The two-poles scene.
+/// The two-poles scene; a keyword left None takes the Rust `PolesOptions::default()` (noise: the
+/// scene's own `POLES_RANGE_NOISE`).
 #[pyfunction]
-#[pyo3(signature = (model=None, *, seed=0, radius=0.1, distance=5.0, distractor=false, noise=None, dropout=0.0, max_tilt_deg=15.0, target_upside_down=false))]
+#[pyo3(signature = (model=None, *, seed=0, radius=None, distance=None, distractor=None, noise=None, dropout=None, max_tilt_deg=None, target_upside_down=None))]
 #[allow(clippy::too_many_arguments)]
 fn sim_poles_scene<'py>(
     py: Python<'py>,
     model: Option<&Bound<'py, PyAny>>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
-    radius: f64,
-    distance: f64,
-    distractor: bool,
+    radius: Option<f64>,
+    distance: Option<f64>,
+    distractor: Option<bool>,
     noise: Option<f64>,
-    dropout: f64,
-    max_tilt_deg: f64,
-    target_upside_down: bool,
+    dropout: Option<f64>,
+    max_tilt_deg: Option<f64>,
+    target_upside_down: Option<bool>,
 ) -> PyResult<Scene> {
     let model = model_arg(model)?;
+    let d = PolesOptions::default();
     let options = PolesOptions {
         seed,
-        radius,
-        distance,
-        distractor,
-        range_noise: noise,
-        dropout,
-        max_tilt_deg,
-        target_upside_down,
+        radius: radius.unwrap_or(d.radius),
+        distance: distance.unwrap_or(d.distance),
+        distractor: distractor.unwrap_or(d.distractor),
+        range_noise: noise.or(d.range_noise),
+        dropout: dropout.unwrap_or(d.dropout),
+        max_tilt_deg: max_tilt_deg.unwrap_or(d.max_tilt_deg),
+        target_upside_down: target_upside_down.unwrap_or(d.target_upside_down),
     };
     let inner = run(py, move || poles_scene(&model, &options))?;
     Ok(Scene {
@@ -514,27 +545,40 @@ fn sim_poles_scene<'py>(
     })
 }
 
-/// The paper's synthetic protocol; configuration 1 or 2 (Table II) or None (random).
+/// A paper configuration as Python names it: 1, 2 or None (random).
+fn configuration_number(configuration: PaperConfiguration) -> Option<u8> {
+    match configuration {
+        PaperConfiguration::One => Some(1),
+        PaperConfiguration::Two => Some(2),
+        PaperConfiguration::Random => None,
+    }
+}
+
+/// The paper's synthetic protocol; configuration 1 or 2 (Table II) or None (random). alpha_deg
+/// None takes the Rust `PaperOptions::default()`: alpha_deg=90.
 #[pyfunction]
-#[pyo3(signature = (*, alpha_deg=90.0, configuration=Some(1), seed=0))]
+#[pyo3(signature = (*, alpha_deg=None, configuration=Some(1), seed=0))]
 fn sim_paper_scene(
     py: Python<'_>,
-    alpha_deg: f64,
+    alpha_deg: Option<f64>,
     configuration: Option<u8>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<Scene> {
-    let configuration = match configuration {
-        Some(1) => PaperConfiguration::One,
-        Some(2) => PaperConfiguration::Two,
-        None => PaperConfiguration::Random,
-        Some(other) => {
-            return Err(PyValueError::new_err(format!(
-                "configuration must be 1, 2 or None (random), got {other}"
-            )))
-        }
-    };
+    let configuration = [
+        PaperConfiguration::One,
+        PaperConfiguration::Two,
+        PaperConfiguration::Random,
+    ]
+    .into_iter()
+    .find(|c| configuration_number(*c) == configuration)
+    .ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "configuration must be 1, 2 or None (random), got {}",
+            configuration.map_or("None".into(), |c| c.to_string())
+        ))
+    })?;
     let options = PaperOptions {
-        alpha_deg,
+        alpha_deg: alpha_deg.unwrap_or(PaperOptions::default().alpha_deg),
         configuration,
         seed,
     };
@@ -613,6 +657,66 @@ fn sim_pole_axis_trial(
         t.cylinder_free_radius_error,
         t.estimated_radius,
     ))
+}
+
+/// The Rust defaults behind this file's keywords (see `super::defaults`).
+pub(crate) fn defaults(out: &Bound<'_, PyDict>) -> PyResult<()> {
+    let model = Preset::default().name();
+    let b = BeamSettings::default();
+    let t = table(out, "BeamModel.custom")?;
+    t.set_item("columns", b.columns)?;
+    t.set_item("min_range", b.min_range)?;
+    t.set_item("max_range", b.max_range)?;
+    t.set_item("range_noise", b.range_noise)?;
+    table(out, "Shape.rectangle")?.set_item("intensity", intensity_tuple(RECTANGLE_INTENSITY))?;
+    table(out, "Shape.cuboid")?.set_item("intensity", intensity_tuple(CUBOID_INTENSITY))?;
+    let t = table(out, "Shape.cylinder")?;
+    t.set_item("intensity", intensity_tuple(CYLINDER_INTENSITY))?;
+    t.set_item("band_intensity", intensity_tuple(BAND_INTENSITY))?;
+
+    let o = ScanOptions::default();
+    let t = table(out, "sim_scan")?;
+    t.set_item("model", model)?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("dropout", o.dropout)?;
+
+    let o = CornerOptions::default();
+    let t = table(out, "sim_corner_scene")?;
+    t.set_item("model", model)?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("clutter_boxes", o.clutter_boxes)?;
+    t.set_item("extra_walls", o.extra_walls)?;
+    t.set_item("dropout", o.dropout)?;
+    t.set_item("wall_angle_deg", o.wall_angle_deg)?;
+    t.set_item("target_tilt_deg", o.target_tilt_deg)?;
+
+    let o = PolesOptions::default();
+    let t = table(out, "sim_poles_scene")?;
+    t.set_item("model", model)?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("radius", o.radius)?;
+    t.set_item("distance", o.distance)?;
+    t.set_item("distractor", o.distractor)?;
+    t.set_item("noise", o.range_noise.unwrap_or(POLES_RANGE_NOISE))?;
+    t.set_item("dropout", o.dropout)?;
+    t.set_item("max_tilt_deg", o.max_tilt_deg)?;
+    t.set_item("target_upside_down", o.target_upside_down)?;
+
+    let o = StreetOptions::default();
+    let t = table(out, "sim_street_scene")?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("side", side_name(o.side))?;
+    t.set_item("target_tilt_deg", o.target_tilt_deg)?;
+    t.set_item("clutter", o.clutter)?;
+    t.set_item("cross_wall", o.cross_wall)?;
+    t.set_item("target_offset", o.target_offset)?;
+
+    let o = PaperOptions::default();
+    let t = table(out, "sim_paper_scene")?;
+    t.set_item("alpha_deg", o.alpha_deg)?;
+    t.set_item("configuration", configuration_number(o.configuration))?;
+    t.set_item("seed", o.seed)?;
+    Ok(())
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -9,12 +9,12 @@ use crate::error::{Error, Result};
 /// Most points the hypothesis search (scoring, local optimisation, adaptive stopping) runs on.
 /// Larger clouds are searched on a fixed-stride subset: the inlier ratio, and so the ranking of
 /// hypotheses, is the same; the final support and least-squares refit use every point.
-pub const MAX_SEARCH_POINTS: usize = 32_768;
+pub(super) const MAX_SEARCH_POINTS: usize = 32_768;
 
 /// Hypotheses per batch. Fixed, so the sequence of batches (and the result) never depends on the
 /// number of threads; large enough to keep both cores busy, small enough that adaptive stopping
 /// overshoots by little.
-pub const BATCH: usize = 32;
+const BATCH: usize = 32;
 
 /// Models scored together in one pass over the data by the kernels.
 pub const GROUP: usize = 8;

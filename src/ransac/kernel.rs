@@ -2,7 +2,7 @@
 //!
 //! Up to [`GROUP`] models are scored in one pass over a structure-of-arrays cloud, each point
 //! tested against every model with the estimator's squared-distance function. Accumulators are
-//! `f32` lanes ([`LANES`] per model, SIMD-friendly), flushed to `f64` every [`BLOCK`] points to
+//! `f32` lanes (8 per model, SIMD-friendly), flushed to `f64` every 1024 points to
 //! bound their rounding. The inlier count is a compile-time option: counting costs registers in
 //! the hot loop and the search needs only the cost.
 //!
@@ -13,9 +13,9 @@
 use super::consensus::{Score, GROUP};
 
 /// Points per lane-accumulator block.
-pub const BLOCK: usize = 1024;
+const BLOCK: usize = 1024;
 /// Lanes of the accumulators.
-pub const LANES: usize = 8;
+const LANES: usize = 8;
 
 /// MSAC scores of up to [`GROUP`] `models` over the cloud `(x, y, z)`; `out[k]` receives the
 /// score of `models[k]` (with its inlier count when `count_inliers`). `d2(model, x, y, z)` is

@@ -11,7 +11,7 @@ use crate::geometry::Line;
 
 /// Two sample points closer than this (relative to their distance from the cloud's frame origin
 /// plus one metre) are coincident.
-pub const MIN_SAMPLE_SEPARATION: f64 = 1e-9;
+const MIN_SAMPLE_SEPARATION: f64 = 1e-9;
 
 /// The 2-point line estimator.
 #[derive(Debug, Clone, Copy, Default)]

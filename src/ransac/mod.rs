@@ -13,7 +13,7 @@
 //!   when the number of hypotheses reaches `log(1 - confidence) / log(1 - w^s)` for inlier ratio
 //!   `w` and sample size `s`; a final least-squares refit gives the returned model.
 //!
-//! The search runs on at most [`consensus::MAX_SEARCH_POINTS`] points (a fixed stride through a
+//! The search runs on at most 32 768 points (a fixed stride through a
 //! larger cloud, which keeps its inlier ratio); the returned model is refitted on, and its inliers
 //! counted over, every point. Scoring runs on a structure-of-arrays copy of the searched points in `f32`, centred on the per-axis median of
 //! a sample ([`robust_center`]) so that `f32` keeps sub-millimetre resolution far from the sensor
@@ -185,9 +185,9 @@ impl<'a> Cloud<'a> {
 
 /// Points (at most, a fixed stride through the cloud) whose per-axis median centres the `f32`
 /// scoring copy.
-pub const CENTER_SAMPLE: usize = 4096;
+const CENTER_SAMPLE: usize = 4096;
 
-/// The per-axis median of a strided sample of at most [`CENTER_SAMPLE`] points: the centre of the
+/// The per-axis median of a strided sample of at most 4096 points: the centre of the
 /// `f32` scoring copy. Unlike the bounding-box midpoint it stays among the bulk of the points when
 /// a few are wildly far (a single return at 1e9 m once moved the midpoint so far that `f32` lost
 /// every centimetre and no plane was found). Deterministic: no dependence on threads or order of
@@ -297,4 +297,5 @@ pub fn inliers<E: Estimator>(
 /// Per-point passes (inliers, joint assignment) run in parallel only from this many points: below
 /// it, handing the work to the thread pool costs more than it saves (measured on 10k-point clouds).
 /// The output is the same either way.
-pub const PARALLEL_MIN_POINTS: usize = 16_384;
+#[cfg(feature = "parallel")]
+const PARALLEL_MIN_POINTS: usize = 16_384;

@@ -18,7 +18,7 @@ use crate::fit::Moments;
 use crate::geometry::Plane;
 
 /// A sample is degenerate when the sine of the angle between its two edges is below this.
-pub const MIN_SAMPLE_SINE: f64 = 1e-6;
+const MIN_SAMPLE_SINE: f64 = 1e-6;
 
 /// The 3-point plane estimator.
 #[derive(Debug, Clone, Copy, Default)]
@@ -130,14 +130,14 @@ pub struct ExtractOptions {
     pub ransac: RansacOptions,
     /// When set (radians), a plane within this angle of an already accepted plane, or of the
     /// span of two accepted planes' normals, is discarded: its points leave the pool and the
-    /// search goes on (at most [`MAX_DISCARDED`] times). The calibration uses it to find three
+    /// search goes on (at most 4 times). The calibration uses it to find three
     /// linearly independent planes when a surface comes in two parallel parts (a facade with a
     /// recessed storey, a curb beside a road) or a third wall is larger than the floor.
     pub min_angle_between: Option<f64>,
 }
 
 /// Most planes [`extract_planes`] discards as dependent on the accepted ones before giving up.
-pub const MAX_DISCARDED: usize = 4;
+const MAX_DISCARDED: usize = 4;
 
 impl ExtractOptions {
     /// `count` planes with threshold `distance_threshold`, at least 50 inliers each, 3 joint rounds.

@@ -26,10 +26,12 @@ pub const MAX_COLUMNS: usize = 360_000;
 /// Largest range noise (metres, 1 sigma) accepted: anything above is not a LiDAR.
 pub const MAX_RANGE_NOISE: f64 = 10.0;
 
-/// The preset sensors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// The preset sensors. The default, the VLP-16, is the model the scenes and `lidarcal.sim` use
+/// when none is named.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Preset {
     /// Velodyne VLP-16 (Puck).
+    #[default]
     Vlp16,
     /// Velodyne HDL-32E.
     Hdl32e,
@@ -69,6 +71,32 @@ impl Preset {
             other => Err(Error::InvalidInput(format!(
                 "unknown LiDAR model {other:?}; expected one of vlp16, hdl32, hdl64, os128"
             ))),
+        }
+    }
+}
+
+/// The settings of a custom [`BeamModel`] besides its elevations, in the order
+/// [`BeamModel::custom`] takes them. The default is a VLP-16's azimuth resolution and range limits
+/// with 1 cm range noise: what `lidarcal.sim.BeamModel.custom` uses for a setting it is not given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BeamSettings {
+    /// Azimuth columns per revolution.
+    pub columns: usize,
+    /// Shortest range measured, metres.
+    pub min_range: f64,
+    /// Longest range measured, metres.
+    pub max_range: f64,
+    /// Range noise, metres (1 sigma, along the beam).
+    pub range_noise: f64,
+}
+
+impl Default for BeamSettings {
+    fn default() -> Self {
+        BeamSettings {
+            columns: 1800,
+            min_range: 0.5,
+            max_range: 100.0,
+            range_noise: 0.01,
         }
     }
 }

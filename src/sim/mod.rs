@@ -53,7 +53,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-pub use beams::{BeamModel, Preset};
+pub use beams::{BeamModel, BeamSettings, Preset};
 pub use scenes::{Pole, Scene};
 use shapes::Shape;
 

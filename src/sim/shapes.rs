@@ -39,6 +39,11 @@ impl IntensityRange {
         min: 10.0,
         max: 90.0,
     };
+    /// Painted poles and posts (outside a taped band).
+    pub const POLE: IntensityRange = IntensityRange {
+        min: 30.0,
+        max: 80.0,
+    };
     /// Retro-reflective tape or sign sheeting: above Velodyne's 230 threshold.
     pub const RETROREFLECTIVE: IntensityRange = IntensityRange {
         min: 235.0,

@@ -8,14 +8,14 @@
 //!    squares on the points within the current threshold, and the first quartile of their `|r|`,
 //!    divided by 0.3186 (its value for a unit Gaussian), gives `sigma` and the next threshold. A low quantile is used because the band around a plane also holds clutter and the
 //!    neighbouring planes' points near the intersection lines, which inflate a median. At most
-//!    [`THRESHOLD_SAMPLE`] points (a fixed stride through the cloud) are used. The two clouds are
+//!    4000 points (a fixed stride through the cloud) are used. The two clouds are
 //!    processed side by side (feature `parallel`).
 //! 2. **Planes.** [`extract_planes`] finds three planes per cloud (sequential RANSAC, then the
 //!    joint reassignment that removes the sequential method's tilt near intersection lines),
-//!    discarding any plane within [`MIN_PLANE_ANGLE`] of one already found (real facades come in
+//!    discarding any plane within 20 degrees of one already found (real facades come in
 //!    parallel parts). Each normal is oriented toward its sensor.
 //! 3. **Conditioning.** The three normals must be linearly independent: the smallest singular value
-//!    of the matrix of normals must be at least [`MIN_NORMAL_SINGULAR_VALUE`] (planes within about
+//!    of the matrix of normals must be at least 0.2 (planes within about
 //!    16 degrees of parallel are refused).
 //! 4. **Corner.** The intersection point `o` solves `N o = -d` (eq. 3 of Jiao et al.).
 //! 5. **Correspondence.** Each cloud's planes are put in right-handed order
@@ -23,7 +23,7 @@
 //!    keep that handedness, so only the 3 cyclic shifts remain. Each is scored by the RMS
 //!    misalignment of the normals after Kabsch; the best wins. No "most vertical normal is the
 //!    floor" rule is used, so any mounting works. When the second best scores within
-//!    [`AMBIGUITY_RMS`] (a corner whose three angles are nearly equal, e.g. a cube corner), the
+//!    0.5 degrees (a corner whose three angles are nearly equal, e.g. a cube corner), the
 //!    optional gravity directions `up` break the tie; without them the calibration is refused.
 //! 6. **Initial transform.** `R` by Kabsch on the matched **unit normals** (not `n - o`, which
 //!    mixes translation into rotation), `t = o_ref - R o_tgt` (not `o' - o`).
@@ -37,7 +37,7 @@
 //! 8. **Check.** If a plane's RMS residual after refinement exceeds twice its threshold, the two
 //!    clouds do not agree and the result is refused. Each matched plane's inliers, mapped onto
 //!    the other cloud, must land mostly next to inliers of their partner plane
-//!    ([`MIN_PLANE_AGREEMENT`] of those that land near the other cloud): a pavement or kerb taken
+//!    (25 % of those that land near the other cloud): a pavement or kerb taken
 //!    for the ground in one cloud only fits the three planes, not the scene, and is refused. Then
 //!    the pose passes through [`crate::check`] ([`PlanarOptions::check`], by default
 //!    [`CheckOptions::fitted`]).
@@ -65,28 +65,28 @@ use matching::{closed_form, match_found, right_handed, Matched};
 use refine::{matched_inliers, moments_problem, refine, PlanePairs};
 
 /// Smallest accepted singular value of the 3x3 matrix of plane normals.
-pub const MIN_NORMAL_SINGULAR_VALUE: f64 = 0.2;
+const MIN_NORMAL_SINGULAR_VALUE: f64 = 0.2;
 /// While extracting, a plane within this angle (radians, 20 degrees) of an accepted one is
 /// discarded and the search continues: the method needs three independent planes.
-pub const MIN_PLANE_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
+const MIN_PLANE_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
 /// Orderings whose RMS normal misalignment (radians) is within this of each other are ambiguous
 /// (0.5 degrees).
-pub const AMBIGUITY_RMS: f64 = 0.5 * std::f64::consts::PI / 180.0;
+const AMBIGUITY_RMS: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// A gravity tie-break must separate the candidates' up-vector errors by at least this (radians,
 /// 10 degrees).
-pub const UP_TIE_BREAK_MARGIN: f64 = 10.0 * std::f64::consts::PI / 180.0;
+const UP_TIE_BREAK_MARGIN: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// Threshold used to find the largest plane when estimating the noise (metres).
-pub const COARSE_THRESHOLD: f64 = 0.25;
+const COARSE_THRESHOLD: f64 = 0.25;
 /// First quartile of `|x|` for a standard normal `x`: the noise estimate divides by it.
-pub const GAUSSIAN_ABS_QUARTILE: f64 = 0.318_639_363_964_375;
+const GAUSSIAN_ABS_QUARTILE: f64 = 0.318_639_363_964_375;
 /// Relative cost decrease below which the refinement stops: far below what moves a calibration
 /// (the step then is orders of magnitude under a micro-radian), and it spares the robust loss's
 /// slow tail of iterations.
-pub const CALIBRATION_COST_TOLERANCE: f64 = 1e-10;
+pub(crate) const CALIBRATION_COST_TOLERANCE: f64 = 1e-10;
 /// Points (at most, by a fixed stride) used to estimate a cloud's noise.
-pub const THRESHOLD_SAMPLE: usize = 4000;
+const THRESHOLD_SAMPLE: usize = 4000;
 /// Bounds of an estimated threshold (metres).
-pub const THRESHOLD_RANGE: (f64, f64) = (0.01, 0.5);
+const THRESHOLD_RANGE: (f64, f64) = (0.01, 0.5);
 
 /// Inliers of each matched plane (at most, by a fixed stride) tested against the other cloud's
 /// surface at the final pose.
@@ -99,10 +99,10 @@ const MIN_PLANE_OVERLAP: usize = 30;
 /// lines and clutter the nearest point may belong to something else); the two whose ground was a
 /// pavement 11-15 cm up in one cloud kept 0 % and 11 %, though their three planes fit exactly and
 /// the whole-scene check, dominated by the walls, passed them.
-pub const MIN_PLANE_AGREEMENT: f64 = 0.25;
+const MIN_PLANE_AGREEMENT: f64 = 0.25;
 
 /// Default of [`PlanarOptions::min_plane_width`] (metres).
-pub const MIN_PLANE_WIDTH: f64 = 0.5;
+pub(crate) const MIN_PLANE_WIDTH: f64 = 0.5;
 
 /// Options of [`calibrate_planes`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -166,7 +166,7 @@ pub struct Ordering {
     pub chosen: usize,
     /// Score of the runner-up minus the chosen one's.
     pub margin: f64,
-    /// The geometry alone could not decide (`margin` below [`AMBIGUITY_RMS`]); the gravity
+    /// The geometry alone could not decide (`margin` below 0.5 degrees); the gravity
     /// tie-break decided.
     pub used_up: bool,
 }
@@ -190,7 +190,7 @@ pub struct PlanarDetails {
 
 /// Estimates a cloud's inlier threshold as described in the module docs.
 ///
-/// Returns [`Error::Calibration`] when `3 sigma` exceeds the upper bound of [`THRESHOLD_RANGE`]
+/// Returns [`Error::Calibration`] when `3 sigma` exceeds 0.5 m, the largest accepted threshold
 /// (a cloud without a clear plane, such as a blob).
 pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
     // A few thousand points measure the noise as well as all of them.
@@ -242,15 +242,15 @@ pub fn estimate_threshold(points: &[Point3<f64>], seed: u64) -> Result<f64> {
 /// paper's protocol it gives a mean rotation error of 1.49 mrad against 1.52 at 1.5 sigma and 1.54
 /// at 2 sigma; the wider scales converge in fewer reweighting rounds (about half at 2 sigma on a
 /// 64-beam scan) and are available through `loss`.
-pub const DEFAULT_CAUCHY_SCALE: f64 = 1.0 / 3.0;
+const DEFAULT_CAUCHY_SCALE: f64 = 1.0 / 3.0;
 /// Most re-weighting rounds of the robust refinement.
-pub const IRLS_MAX_ROUNDS: usize = 50;
+const IRLS_MAX_ROUNDS: usize = 50;
 /// The robust refinement stops when a round moves the pose by less than this fraction of the
 /// pose's own standard deviation (the smallest of the six, from the least-squares covariance):
 /// iterating further changes nothing that the data can tell apart.
-pub const IRLS_RELATIVE_STEP: f64 = 1e-3;
+const IRLS_RELATIVE_STEP: f64 = 1e-3;
 /// ... or, whatever the covariance, by less than this (tangent norm: 10 nm, 0.01 micro-radian).
-pub const IRLS_STEP_TOLERANCE: f64 = 1e-8;
+const IRLS_STEP_TOLERANCE: f64 = 1e-8;
 
 /// Prefixes calibration errors with the cloud they concern.
 fn with_cloud(e: Error, which: &str) -> Error {
@@ -274,7 +274,7 @@ fn isometry(rotation: &nalgebra::Rotation3<f64>, t: Vector3<f64>) -> Isometry3<f
 /// sensor's frame: every LiDAR sees something (the ground, its mount) within tens of metres, and
 /// the planes' normals are oriented toward the origin as the sensor, so a far origin flips them
 /// and can turn a calibration by 180 degrees while every check still passes.
-pub const MAX_NEAREST_RANGE: f64 = 50.0;
+const MAX_NEAREST_RANGE: f64 = 50.0;
 
 fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
     if points.len() < 9 {

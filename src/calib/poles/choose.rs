@@ -7,19 +7,19 @@ use crate::error::{Error, FailureKind, Result};
 use crate::geometry::Line;
 
 /// Two refined hypotheses within this rotation (radians) ...
-pub const SAME_POSE_ANGLE: f64 = 0.01;
+const SAME_POSE_ANGLE: f64 = 0.01;
 /// ... and this translation (metres) of each other are the same solution.
-pub const SAME_POSE_DISTANCE: f64 = 0.05;
+const SAME_POSE_DISTANCE: f64 = 0.05;
 /// A score margin below this flags the choice as ambiguous.
-pub const AMBIGUITY_MARGIN: f64 = 1.0;
+pub(super) const AMBIGUITY_MARGIN: f64 = 1.0;
 /// A score margin below this refuses the calibration: the best two are indistinguishable.
-pub const REFUSE_MARGIN: f64 = 0.2;
+pub(super) const REFUSE_MARGIN: f64 = 0.2;
 /// Largest RMS distance (metres) of a matched pole's points from its axis model at the result;
 /// correct results stay under 1 cm, a pose from mismatched poles lands decimetres off.
-pub const MAX_POLE_RMSE: f64 = 0.05;
+pub(super) const MAX_POLE_RMSE: f64 = 0.05;
 /// What [`MAX_POLE_RMSE`] allows in addition for [`AxisFit::Line`], whose residuals include the
 /// pole's thickness (metres).
-pub const LINE_FIT_THICKNESS: f64 = 0.2;
+const LINE_FIT_THICKNESS: f64 = 0.2;
 
 /// The lowest-scoring hypothesis and its margin over the best one that refined to a different
 /// transform (infinite when there is none); refused when there is no hypothesis or the margin is

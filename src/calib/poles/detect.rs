@@ -17,11 +17,11 @@ use crate::ransac::line::ransac_line;
 use crate::ransac::RansacOptions;
 
 /// Line inlier distance when splitting a merged cluster with an unknown radius (metres).
-pub const SPLIT_LINE_THRESHOLD: f64 = 0.2;
+const SPLIT_LINE_THRESHOLD: f64 = 0.2;
 /// Shortest cluster that is split into several lines (metres): crossing poles, not a sign.
-pub const SPLIT_MIN_LENGTH: f64 = 1.0;
+pub(super) const SPLIT_MIN_LENGTH: f64 = 1.0;
 /// Smallest elongation of each piece of a split cluster.
-pub const SPLIT_MIN_ELONGATION: f64 = 3.0;
+const SPLIT_MIN_ELONGATION: f64 = 3.0;
 
 /// A pole found in one cloud.
 #[derive(Debug, Clone, PartialEq)]

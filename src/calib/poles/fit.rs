@@ -10,9 +10,9 @@ use crate::ransac::line::ransac_line;
 use crate::ransac::RansacOptions;
 
 /// Largest RMS of a pole's cylinder fit (metres): a flat strip of a sign does not fit.
-pub const MAX_CYLINDER_RMS: f64 = 0.03;
+pub(super) const MAX_CYLINDER_RMS: f64 = 0.03;
 /// Largest accepted estimated radius (metres).
-pub const MAX_RADIUS: f64 = 1.0;
+pub(super) const MAX_RADIUS: f64 = 1.0;
 
 /// Tests and fits one cluster; `Err` carries the reason it is not a pole.
 pub(super) fn fit_pole(

@@ -7,11 +7,11 @@ use crate::ransac::plane::ransac_plane;
 use crate::ransac::RansacOptions;
 
 /// Points (at most, by a fixed stride) used to find each cloud's largest plane.
-pub const GROUND_SAMPLE: usize = 3000;
+const GROUND_SAMPLE: usize = 3000;
 /// Fewest points (and at least 10 % of the cloud) of the largest plane used in the scores.
-pub const MIN_PLANE_POINTS: usize = 200;
+pub(super) const MIN_PLANE_POINTS: usize = 200;
 /// Inlier distance of the largest-plane search (metres).
-pub const GROUND_THRESHOLD: f64 = 0.05;
+const GROUND_THRESHOLD: f64 = 0.05;
 
 pub(super) fn largest_plane(points: &[Point3<f64>], total: usize, seed: u64) -> Option<Plane> {
     if points.len() < MIN_PLANE_POINTS {

@@ -12,14 +12,14 @@ use crate::residuals::{Frame, LineGroup, PointToLine};
 
 /// Two poles closer than this to parallel (radians, 2 degrees) do not determine the rotation
 /// about them.
-pub const MIN_POLE_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
+pub(super) const MIN_POLE_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
 /// Cap on the number of hypotheses scored (more poles than that enumerate only the first).
-pub const MAX_HYPOTHESES: usize = 120;
+pub(super) const MAX_HYPOTHESES: usize = 120;
 /// A further pole matches a mapped pole when their directions are within this angle (radians,
 /// 5 degrees) ...
-pub const MATCH_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+const MATCH_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// ... and the mapped axis passes within this distance (metres) of the pole's centre.
-pub const MATCH_DISTANCE: f64 = 0.3;
+const MATCH_DISTANCE: f64 = 0.3;
 
 /// One correspondence/sign hypothesis and its score.
 #[derive(Debug, Clone, PartialEq)]

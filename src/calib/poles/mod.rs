@@ -10,8 +10,8 @@
 //!    threshold comes from the data ([`data_threshold`]): retro-reflective returns are saturated
 //!    outliers of the intensity distribution, separated from the diffuse returns by a wide empty
 //!    range, so the threshold is the middle of the **highest** gap between consecutive sorted
-//!    intensities above the median that spans at least [`MIN_INTENSITY_GAP`] of the intensity
-//!    range and leaves at least [`MIN_BRIGHT_CLASS`] returns above it (tape is the brightest
+//!    intensities above the median that spans at least 10 % of the intensity
+//!    range and leaves at least 20 returns above it (tape is the brightest
 //!    class: a bright facade opens a wider gap below itself); without one the cloud has no clear
 //!    bright class and is refused.
 //! 2. **Clustering.** The bright points are grouped by Euclidean clustering
@@ -23,9 +23,9 @@
 //!    elongated: `sqrt(l3 / l2)` of its scatter eigenvalues is at least
 //!    [`PoleOptions::min_elongation`]. A road sign or any compact bright blob (`l3 ~ l2`) fails
 //!    the last test and is reported among the rejected clusters. A cluster that fails but is at
-//!    least [`SPLIT_MIN_LENGTH`] long (poles leaning on each other, an X) is split by sequential
+//!    least 1 m long (poles leaning on each other, an X) is split by sequential
 //!    RANSAC lines, each piece tested again. The cylinder fit must then have an RMS below
-//!    [`MAX_CYLINDER_RMS`] and a diameter below the pole's length.
+//!    3 cm and a diameter below the pole's length.
 //! 4. **Axis.** A RANSAC line ([`crate::ransac::line::ransac_line`], threshold `1.2 r + 3 cm`, or
 //!    `3 sqrt(l2) + 3 cm` when the radius is unknown) drops stray points, then
 //!    [`fit_cylinder`](crate::fit::cylinder::fit_cylinder) finds the axis by Levenberg–Marquardt
@@ -34,7 +34,7 @@
 //! 5. **Hypotheses.** Two non-parallel pole axes fix the transform, but not which target pole is
 //!    which, nor the direction signs: 2 correspondences x 4 signs = 8 hypotheses for two poles
 //!    (with more poles: the first non-parallel pair of reference poles against every ordered pair
-//!    of target poles, at most [`MAX_HYPOTHESES`], further poles matched by proximity). Each is
+//!    of target poles, at most 120, further poles matched by proximity). Each is
 //!    solved in closed form: `R` by Kabsch on the signed unit directions, `t` by linear least
 //!    squares on the perpendicular offsets, `sum_i P_i (R c_t,i + t - c_r,i) = 0` with
 //!    `P_i = I - u_i u_i^T`; then refined by Levenberg–Marquardt on point-to-axis distances in both
@@ -47,17 +47,17 @@
 //!    about the common perpendicular, and swapping the poles to a 180 deg rotation about a bisector
 //!    of the axes; four of the eight hypotheses fit the axes exactly. Each hypothesis gets a score
 //!    (lower is better), the sum of
-//!    * the RMS point-to-axis residual over [`AXIS_RMS_SCALE`];
+//!    * the RMS point-to-axis residual over 2 cm;
 //!    * the angle between the reference's and the mapped target's largest plane among the points
 //!      below the intensity threshold (the ground in a pole scene, both normals toward the
-//!      sensors; it must hold [`MIN_PLANE_POINTS`] points and 10 % of the cloud) over [`GROUND_ANGLE_SCALE`], and the difference
-//!      of their offsets over [`GROUND_OFFSET_SCALE`] (omitted when a cloud shows no plane);
-//!    * `1 - overlap` over [`OVERLAP_SCALE`], where `overlap` is the fraction of (at most
-//!      [`OVERLAP_SAMPLE`]) target points that land within [`PoleOptions::overlap_distance`] of a
+//!      sensors; it must hold 200 points and 10 % of the cloud) over 5 degrees, and the difference
+//!      of their offsets over 0.2 m (omitted when a cloud shows no plane);
+//!    * `1 - overlap` over 0.1, where `overlap` is the fraction of (at most
+//!      1500) target points that land within [`PoleOptions::overlap_distance`] of a
 //!      reference point.
 //!
 //!    The lowest score wins; `margin` is the runner-up's score minus the winner's. Below
-//!    [`AMBIGUITY_MARGIN`] the result is flagged `ambiguous`; below [`REFUSE_MARGIN`] the two are
+//!    1 the result is flagged `ambiguous`; below 0.2 the two are
 //!    indistinguishable and the calibration is refused. Two vertical poles on flat ground with no
 //!    other structure are genuinely symmetric under the swap (a 180 deg turn about the vertical
 //!    between them); tilted poles, the ground seen from two places and any other structure break it.
@@ -65,8 +65,8 @@
 //!    loosely (4-8 cm and up to 1.5 deg off in adversarial scenes with 2-3 cm noise), which the
 //!    check ([`crate::check`]) then refuses. When it does, the check's local re-alignment on the
 //!    whole scene, started from the pole pose, is taken instead when it moves it by at most
-//!    [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`], every matched pole still lies within
-//!    [`MAX_POLE_RMSE`] of its axis there, and it passes the check itself (cylinder fits only: a
+//!    3 degrees and 0.2 m, every matched pole still lies within
+//!    5 cm of its axis there, and it passes the check itself (cylinder fits only: a
 //!    centroid line's residuals include the pole's thickness and cannot tell whether the poles
 //!    still fit). In 1000 adversarial scenes this took the solvable pole scenes solved from 54 to
 //!    74, none wrong. A pole pose that passes is kept.
@@ -112,15 +112,17 @@ mod scene;
 mod score;
 mod threshold;
 
-pub use self::choose::*;
-pub use self::detect::*;
-pub use self::fit::*;
-pub use self::ground::*;
-pub use self::hypotheses::*;
-pub use self::options::*;
-pub use self::scene::*;
-pub use self::score::*;
-pub use self::threshold::*;
+pub use self::detect::{extract_poles, DetectedPole, PoleExtraction, RejectedCluster};
+pub use self::hypotheses::Hypothesis;
+pub use self::options::{AxisFit, PoleOptions, Vendor, MAX_BRIGHT_FRACTION};
+pub use self::threshold::data_threshold;
+
+use self::choose::{check_pole_fit, choose, MatchedPoles, AMBIGUITY_MARGIN};
+use self::detect::detect_cloud;
+use self::hypotheses::{base_matches, per_pole_rms, Clouds};
+use self::options::{check_cloud, check_options};
+use self::scene::settle;
+use self::score::Scorer;
 
 use nalgebra::Point3;
 
@@ -150,7 +152,7 @@ pub struct PoleDetails {
     /// Score of the best hypothesis that refined to a different transform minus the chosen one's
     /// (infinite when all reached the same transform).
     pub margin: f64,
-    /// The margin is below [`AMBIGUITY_MARGIN`].
+    /// The margin is below 1.
     pub ambiguous: bool,
     /// The chosen hypothesis's Levenberg–Marquardt report (its pose is the result unless the
     /// scene settled it: [`Calibration::refinement`](crate::calib::Calibration::refinement)).

@@ -11,9 +11,9 @@ use crate::geometry::pose_error;
 
 /// The scene's re-alignment of the pole pose is kept only within this rotation (radians, 3
 /// degrees) ...
-pub const SCENE_REFINE_ANGLE: f64 = 3.0 * std::f64::consts::PI / 180.0;
+pub(super) const SCENE_REFINE_ANGLE: f64 = 3.0 * std::f64::consts::PI / 180.0;
 /// ... and this translation (metres) of it, where the poles still fit ([`MAX_POLE_RMSE`]).
-pub const SCENE_REFINE_DISTANCE: f64 = 0.2;
+pub(super) const SCENE_REFINE_DISTANCE: f64 = 0.2;
 
 /// The final check of the pole pose (`pole_rmse` is its per-pole RMS); when the check refuses
 /// it, the check's re-alignment on the whole scene is taken instead if it stays within

@@ -12,15 +12,15 @@ use crate::geometry::{Line, Plane};
 use crate::lm::{solve, LmReport};
 
 /// Unit of the axis RMS term of a hypothesis score (metres).
-pub const AXIS_RMS_SCALE: f64 = 0.02;
+pub(super) const AXIS_RMS_SCALE: f64 = 0.02;
 /// Unit of the ground-normal angle term (radians, 5 degrees).
-pub const GROUND_ANGLE_SCALE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+pub(super) const GROUND_ANGLE_SCALE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// Unit of the ground-offset term (metres).
-pub const GROUND_OFFSET_SCALE: f64 = 0.2;
+pub(super) const GROUND_OFFSET_SCALE: f64 = 0.2;
 /// Unit of the `1 - overlap` term.
-pub const OVERLAP_SCALE: f64 = 0.1;
+pub(super) const OVERLAP_SCALE: f64 = 0.1;
 /// Target points (at most, by a fixed stride) used for the overlap term.
-pub const OVERLAP_SAMPLE: usize = 1500;
+pub(super) const OVERLAP_SAMPLE: usize = 1500;
 
 /// Solves, refines and scores the hypotheses of one pair of clouds.
 pub(super) struct Scorer<'a> {

@@ -3,10 +3,10 @@
 use crate::error::{Error, FailureKind, Result};
 
 /// The automatic threshold's gap must span at least this fraction of the intensity range.
-pub const MIN_INTENSITY_GAP: f64 = 0.1;
+pub(super) const MIN_INTENSITY_GAP: f64 = 0.1;
 /// Fewest returns above the automatic threshold's gap: a handful of saturated returns above the
 /// tape is not the tape class.
-pub const MIN_BRIGHT_CLASS: usize = 20;
+pub(super) const MIN_BRIGHT_CLASS: usize = 20;
 
 /// The data-driven intensity threshold of the module docs.
 pub fn data_threshold(intensities: &[f64]) -> Result<f64> {

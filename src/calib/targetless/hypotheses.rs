@@ -5,41 +5,41 @@ use std::collections::{HashMap, HashSet};
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::options::*;
-use super::segment::*;
-use super::verify::*;
+use super::options::TargetlessOptions;
+use super::segment::PlaneFeature;
+use super::verify::VIOLATION_WEIGHT;
 use crate::kabsch::kabsch;
 use crate::visibility::RangeImage;
 
 /// Two planes of a hypothesis pair must be at least this far from parallel (radians, 30 degrees).
-pub const MIN_PAIR_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
+pub(super) const MIN_PAIR_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
 /// A third plane completes a triplet when its normal leaves the pair's span by at least this
 /// angle (radians, 20 degrees).
-pub const MIN_THIRD_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
+const MIN_THIRD_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
 /// Most hypotheses enumerated (pairs and triplets, before deduplication).
-pub const MAX_HYPOTHESES: usize = 50_000;
+const MAX_HYPOTHESES: usize = 50_000;
 /// Hypotheses within this rotation (radians, 1 degree) ...
-pub const DUPLICATE_ANGLE: f64 = 1.0 * std::f64::consts::PI / 180.0;
+const DUPLICATE_ANGLE: f64 = 1.0 * std::f64::consts::PI / 180.0;
 /// ... and translation (metres) of each other are one.
-pub const DUPLICATE_DISTANCE: f64 = 0.1;
+const DUPLICATE_DISTANCE: f64 = 0.1;
 /// Yaw step of the ground sweep (radians, 15 degrees): the hypotheses that level the largest
 /// plane of each cloud onto the other's and turn about its normal.
-pub const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
+pub(super) const SWEEP_STEP: f64 = 15.0 * std::f64::consts::PI / 180.0;
 /// Largest planes of the target tried as the reference's largest plane in the ground sweep.
-pub const SWEEP_TARGET_PLANES: usize = 1;
+const SWEEP_TARGET_PLANES: usize = 1;
 /// Step (metres) of the slide of a plane-pair hypothesis along the direction its planes leave
 /// free (the axis of a street): see the module docs, step 3.
-pub const SLIDE_STEP: f64 = 0.5;
+pub(super) const SLIDE_STEP: f64 = 0.5;
 /// Farthest a hypothesis slides (metres) when [`TargetlessOptions::max_translation`] is larger
 /// (or infinite).
-pub const SLIDE_RANGE: f64 = 10.0;
+const SLIDE_RANGE: f64 = 10.0;
 /// A slid target point agrees when it lands in a cell of this side (metres) that holds a reference
 /// point: as coarse as the step, so the best offset is found before any ICP.
-pub const SLIDE_CELL: f64 = 0.5;
+pub(super) const SLIDE_CELL: f64 = 0.5;
 /// Target points (at most, by a fixed stride) scored at every slide offset.
-pub const SLIDE_SAMPLES: usize = 400;
+pub(super) const SLIDE_SAMPLES: usize = 400;
 /// Offsets closer than this to the hypothesis' own (metres) are left to its screening ICP.
-pub const SLIDE_MIN: f64 = 0.75;
+const SLIDE_MIN: f64 = 0.75;
 /// Local maxima of the slide score of the best pose probed for a repeated structure (see
 /// [`calibrate_targetless`]).
 pub(super) const SLIDE_PEAKS: usize = 2;

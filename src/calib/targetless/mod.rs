@@ -5,13 +5,13 @@
 //! 1. **Downsample.** Each cloud is reduced to voxel centroids ([`TargetlessOptions::voxel_size`]),
 //!    which evens out a spinning LiDAR's density and bounds the work.
 //! 2. **Planes.** Up to [`TargetlessOptions::max_planes`] distinct planes per cloud
-//!    ([`segment_planes`]: flat patches of [`PATCH_SIZE`] grown into surfaces and merged where
+//!    ([`segment_planes`]: flat patches of 1 m cells grown into surfaces and merged where
 //!    they continue one another, as an uneven road does, plus sequential RANSAC for the few scan
 //!    lines a tilted unit puts on a facade, which make no flat patch). Each keeps its inlier
 //!    count, centroid and extent ([`PlaneFeature`]). The inlier threshold is `3 sigma` of each
 //!    cloud's noise ([`estimate_threshold`](super::planes::estimate_threshold)) unless given.
 //! 3. **Hypotheses.** Two non-parallel planes fix the rotation: for every pair of reference planes
-//!    at least [`MIN_PAIR_ANGLE`] from parallel and every ordered pair of target planes whose
+//!    at least 30 degrees from parallel and every ordered pair of target planes whose
 //!    normals make the same angle (within [`TargetlessOptions::normal_tolerance`]), Kabsch on the
 //!    two unit normals and their cross product gives `R` (normals are oriented toward their
 //!    sensor, so the handedness is kept and mirror matches never arise). The pair gives two
@@ -23,24 +23,24 @@
 //!    at the minimum-norm value (sensors of one rig are close together) and is settled by its
 //!    slide and by ICP.
 //!    **Ground sweep** ([`TargetlessOptions::ground_sweep`]): the largest plane of each cloud (the
-//!    road) levelled onto the other's and turned about its normal in [`SWEEP_STEP`] steps, the
+//!    road) levelled onto the other's and turned about its normal in 15-degree steps, the
 //!    in-plane translation left to ICP; this covers scenes that share no plane pair.
 //!    **Slides**: a pair hypothesis starts at the minimum-norm translation, which is as far from
 //!    the truth along the free direction as the sensors are apart along it (3 m for a unit at the
 //!    back of a car) and beyond the reach of ICP. Each of the best pair hypotheses also gets a
-//!    slid copy, moved along its free direction by the multiple of [`SLIDE_STEP`] whose sampled
+//!    slid copy, moved along its free direction by the multiple of 0.5 m whose sampled
 //!    points agree best with the reference (and violate its free space least).
 //! 4. **Verification.** Pair hypotheses are deduplicated (1 degree, 10 cm) and ranked by the
 //!    planes they bring into agreement (a target plane agrees with a reference plane when their
 //!    normals are within the tolerance and, where the hypothesis fixes it, their offsets within
 //!    [`TargetlessOptions::offset_tolerance`]), weighted by inliers. The best
 //!    [`TargetlessOptions::max_verified`], their slid copies and the sweep hypotheses are
-//!    screened (a quick ICP and score), and the best [`SCREEN_KEEP`] distinct ones get a longer ICP and the full score: the
-//!    share of target points within [`VERIFY_DISTANCE`] of a reference point minus
-//!    [`VIOLATION_WEIGHT`] times the free-space violations both ways ([`crate::visibility`]:
+//!    screened (a quick ICP and score), and the best 12 distinct ones get a longer ICP and the full score: the
+//!    share of target points within 0.25 m of a reference point minus
+//!    3 times the free-space violations both ways ([`crate::visibility`]:
 //!    points that land in space the other sensor saw through). Point agreement alone prefers the
 //!    180-degree turn of some streets; the violations reject it. The best score of a pose more
-//!    than 2 degrees or 30 cm away is the second best; when it reaches [`AMBIGUITY_RATIO`] of the
+//!    than 2 degrees or 30 cm away is the second best; when it reaches 75 % of the
 //!    best after both are polished, the result is refused as ambiguous (or flagged) unless the
 //!    check ([`crate::check`]) passes the best and rules the rival out: a rival turned at least
 //!    10 degrees from the best whose overlap leaves a direction unconstrained (a half turn whose
@@ -55,13 +55,13 @@
 //!    each axis of the largest reference planes (normals, and the lines two of them share) through
 //!    the reference centroid and through its middle along the normals (a room's own centre); each
 //!    turn is settled by ICP and scored, and one that comes within
-//!    [`AMBIGUITY_RATIO`] of the best (and is not ruled out by the check) makes the result
+//!    75 % of the best (and is not ruled out by the check) makes the result
 //!    ambiguous.
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the
 //!    calibration is refused as out of range; when one comes within
-//!    [`CHALLENGER_AMBIGUITY_RATIO`] of the best, as ambiguous. Without them, sensors 5-8 m apart
+//!    90 % of the best, as ambiguous. Without them, sensors 5-8 m apart
 //!    came back as the best pose within 5 m: a quarter turn, a half turn or a shift along the
 //!    street.
 //! 5. **Refinement.** Every target plane that agrees with a reference plane at the winning pose is
@@ -113,14 +113,19 @@ mod segment;
 mod symmetry;
 mod verify;
 
-pub use self::hypotheses::*;
-use self::observability::*;
-pub use self::options::*;
-pub use self::refine::*;
-use self::rivals::*;
-pub use self::segment::*;
-pub use self::verify::*;
+pub use self::options::TargetlessOptions;
+pub use self::segment::{plane_features, segment_planes, PlaneFeature};
 pub use crate::geometry::pose_error;
+
+use self::hypotheses::{
+    ground_sweep, hypotheses, in_range, slides, Candidate, Occupancy, SlideField, SLIDE_CELL,
+    SLIDE_SAMPLES,
+};
+use self::observability::observability;
+use self::refine::{final_icp, refine_planes, PlaneRefinement};
+use self::rivals::{ambiguity_message, find_rival, Contest, LazyCheck};
+use self::segment::{check_cloud, prepare, Prepared};
+use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
@@ -151,18 +156,18 @@ pub struct TargetlessDetails {
     /// Whether the winning hypothesis came from the ground sweep.
     pub sweep: bool,
     /// Verification score of the best hypothesis: the share of target points within
-    /// [`VERIFY_DISTANCE`] of a reference point, minus [`VIOLATION_WEIGHT`] times the free-space
+    /// 0.25 m of a reference point, minus 3 times the free-space
     /// violations ([`TargetlessDetails::violations`]).
     pub best_score: f64,
     /// Best verification score of a hypothesis ending at a different pose (0 when none).
     pub second_score: f64,
-    /// Share of the best hypothesis' checked target points within [`VERIFY_DISTANCE`] of a
+    /// Share of the best hypothesis' checked target points within 0.25 m of a
     /// reference point.
     pub agreement: f64,
     /// Free-space violations of the best hypothesis: the share of checked target points in space
     /// the reference saw through, and of reference points in space the target saw through.
     pub violations: [f64; 2],
-    /// `true` when a distinct pose scored at least [`AMBIGUITY_RATIO`] of the best (only
+    /// `true` when a distinct pose scored at least 75 % of the best (only
     /// returned when [`TargetlessOptions::refuse_ambiguous`] is off).
     pub ambiguous: bool,
     /// Inlier thresholds used for the reference and the target cloud (metres).

@@ -8,15 +8,15 @@ use crate::icp::IcpOptions;
 /// a sparse 16-beam scan the pose keeps creeping 0.5-1 mm per iteration along the weakest
 /// direction for tens of iterations; at 30, eight solvable adversarial scenes (of 1000) were
 /// refused as unsettled that settle on the truth within 100.
-pub const FINAL_ICP_ITERATIONS: usize = 100;
+const FINAL_ICP_ITERATIONS: usize = 100;
 /// Default of [`TargetlessOptions::challenger_range`].
-pub const CHALLENGER_RANGE: f64 = 2.0;
+const CHALLENGER_RANGE: f64 = 2.0;
 
 /// Options of [`calibrate_targetless`](super::calibrate_targetless).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TargetlessOptions {
     /// Plane inlier distance (metres), or `None` to estimate it per cloud (3 sigma, within
-    /// [`ESTIMATED_THRESHOLD_RANGE`](super::ESTIMATED_THRESHOLD_RANGE)).
+    /// 3 to 10 cm).
     pub distance_threshold: Option<f64>,
     /// Voxel side of the downsampling (metres).
     pub voxel_size: f64,
@@ -36,7 +36,7 @@ pub struct TargetlessOptions {
     /// Hypotheses up to this multiple of `max_translation` away are verified too, as
     /// **challengers** (see the module docs, step 4): never returned, but when one verifies
     /// best the calibration is refused as out of range, and when one comes within
-    /// [`CHALLENGER_AMBIGUITY_RATIO`](super::CHALLENGER_AMBIGUITY_RATIO) of the best, as ambiguous. In 1000 adversarial scenes
+    /// 90 % of the best, as ambiguous. In 1000 adversarial scenes
     /// every wrong answer for sensors 5.3-8 m apart (a shift along the street, a quarter or half
     /// turn) was the best pose within 5 m. The price: on streets that repeat themselves along
     /// their axis a pose beyond the bound can fit as well as the truth within it, and the
@@ -50,11 +50,11 @@ pub struct TargetlessOptions {
     /// below it the calibration is refused as unobservable.
     pub min_information_share: f64,
     /// Also hypothesise from the largest plane of each cloud (the ground of a road scene) turned
-    /// about its normal in steps of [`SWEEP_STEP`](super::SWEEP_STEP), each polished by ICP: this finds the pose
+    /// about its normal in steps of 15 degrees, each polished by ICP: this finds the pose
     /// when the clouds share no pair of non-parallel planes.
     pub ground_sweep: bool,
     /// Refuse (rather than flag [`TargetlessDetails::ambiguous`](super::TargetlessDetails::ambiguous)) when a distinct pose
-    /// verifies almost as well as the best ([`AMBIGUITY_RATIO`](super::AMBIGUITY_RATIO)).
+    /// verifies almost as well as the best (at least 75 % of its score).
     pub refuse_ambiguous: bool,
     /// Seed of the RANSAC sampler.
     pub seed: u64,

@@ -19,15 +19,15 @@ use crate::residuals::{Frame, PlaneMomentGroup, PlaneMomentsProblem};
 /// answer to the ranking) that are also run through the final ICP; the one that settles elsewhere
 /// and keeps the other sensor's free space clearer replaces the result (the plane refinement's
 /// pose is the other candidate; see [`SCORE_MARGIN`]).
-pub const NEAR_ALTERNATIVES: usize = 2;
+const NEAR_ALTERNATIVES: usize = 2;
 /// Poses within this angle (radians, 0.5 deg) ...
-pub const SETTLED_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
+const SETTLED_ANGLE: f64 = 0.5 * std::f64::consts::PI / 180.0;
 /// ... and this distance (metres) are one result: the check's default detectable error.
-pub const SETTLED_DISTANCE: f64 = 0.06;
+const SETTLED_DISTANCE: f64 = 0.06;
 /// A candidate replaces the final ICP result when it puts fewer points into the other sensor's
 /// free space and its score on the check's figures, `agreement - VIOLATION_WEIGHT violations`
 /// (as in the verification), is higher by at least this much, and it passes the check.
-pub const SCORE_MARGIN: f64 = 0.02;
+const SCORE_MARGIN: f64 = 0.02;
 
 /// The final ICP result `main`, or the first of `candidates` (other results for the same answer)
 /// that settles elsewhere and fits better on the [`check`](crate::check::check)'s own figures (the

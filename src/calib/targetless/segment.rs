@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::super::planes::estimate_threshold;
-use super::options::*;
+use super::options::TargetlessOptions;
 use crate::error::{ensure_finite, Error, Result};
 use crate::fit::Moments;
 use crate::geometry::Plane;
@@ -15,33 +15,33 @@ use crate::ransac::RansacOptions;
 /// Bounds of the inlier threshold taken from the noise estimate (metres). Road scenes are not
 /// flat (camber, kerbs, pavements): when the estimate fails or exceeds the upper bound, the upper
 /// bound is used.
-pub const ESTIMATED_THRESHOLD_RANGE: (f64, f64) = (0.03, 0.1);
+pub(super) const ESTIMATED_THRESHOLD_RANGE: (f64, f64) = (0.03, 0.1);
 /// Side of the cubic cells whose points form the local patches of the plane segmentation (m).
-pub const PATCH_SIZE: f64 = 1.0;
+pub(super) const PATCH_SIZE: f64 = 1.0;
 /// Fewest (downsampled) points of a patch.
-pub const PATCH_MIN_POINTS: usize = 5;
+const PATCH_MIN_POINTS: usize = 5;
 /// A patch is flat when the RMS distance of its points to their plane is under this fraction of
 /// the inlier threshold ...
-pub const PATCH_MAX_THICKNESS: f64 = 0.8;
+const PATCH_MAX_THICKNESS: f64 = 0.8;
 /// ... and its points spread at least this far (metres, RMS) along its second axis (not a line).
-pub const PATCH_MIN_SPREAD: f64 = 0.1;
+const PATCH_MIN_SPREAD: f64 = 0.1;
 /// A neighbouring patch joins a growing plane when its normal is within this angle (radians,
 /// 10 degrees) of the plane's ...
-pub const GROW_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
+const GROW_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// ... and its centroid within this many inlier thresholds of the plane.
-pub const GROW_OFFSET: f64 = 2.0;
+const GROW_OFFSET: f64 = 2.0;
 /// A segmented plane within this angle (radians, 5 degrees) ...
-pub const MERGE_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+const MERGE_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// ... and offset (metres) of a larger one is another part of the same surface (an uneven road)
 /// and is not kept as a plane of its own.
-pub const MERGE_OFFSET: f64 = 0.3;
+const MERGE_OFFSET: f64 = 0.3;
 /// RANSAC hypotheses per sequentially extracted plane.
-pub const PLANE_RANSAC_ITERATIONS: usize = 1000;
+const PLANE_RANSAC_ITERATIONS: usize = 1000;
 /// Points (at most, by a fixed stride) each sequential RANSAC run samples and scores; the
 /// inliers are then collected from all remaining points.
-pub const SEQUENTIAL_SAMPLES: usize = 15_000;
+const SEQUENTIAL_SAMPLES: usize = 15_000;
 /// Smallest extent of a plane along its second in-plane axis (metres).
-pub const MIN_PLANE_WIDTH: f64 = 1.0;
+const MIN_PLANE_WIDTH: f64 = 1.0;
 
 /// A plane of one cloud with what the matching uses.
 #[derive(Debug, Clone, PartialEq)]
@@ -102,7 +102,7 @@ pub(super) struct Patch {
 }
 
 /// Up to `max_planes` distinct planar surfaces of `points` by region growing over flat local
-/// patches (see [`PATCH_SIZE`] and the growing constants), largest first. Each plane is refitted
+/// patches (1 m cells, grown where their normals and offsets agree), largest first. Each plane is refitted
 /// on its patches' points; its inliers are those within `threshold`.
 pub fn segment_planes(
     points: &[Point3<f64>],

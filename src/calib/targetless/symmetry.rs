@@ -3,8 +3,8 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::segment::*;
-use super::verify::*;
+use super::segment::PlaneFeature;
+use super::verify::DISTINCT_DISTANCE;
 
 /// Largest reference planes whose normals (and the lines they share) give the half turns of
 /// [`half_turns`].

@@ -3,42 +3,42 @@
 
 use nalgebra::{Isometry3, Point3};
 
-use super::hypotheses::*;
+use super::hypotheses::{same_pose, Candidate};
 use crate::error::Result;
 use crate::icp::{point_to_plane_fit, point_to_plane_icp, IcpOptions, IcpResult, SurfaceCloud};
 use crate::visibility::RangeImage;
 
 /// Two verified hypotheses further apart than this rotation (radians, 2 degrees) ...
-pub const DISTINCT_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
+pub(super) const DISTINCT_ANGLE: f64 = 2.0 * std::f64::consts::PI / 180.0;
 /// ... or this translation (metres) are different answers (for the second-best score).
-pub const DISTINCT_DISTANCE: f64 = 0.3;
+pub(super) const DISTINCT_DISTANCE: f64 = 0.3;
 /// A verified target point agrees when a reference point lies within this distance (metres).
-pub const VERIFY_DISTANCE: f64 = 0.25;
+pub(super) const VERIFY_DISTANCE: f64 = 0.25;
 /// Target points (at most, by a fixed stride) scored in the verification.
-pub const VERIFY_SAMPLES: usize = 800;
+const VERIFY_SAMPLES: usize = 800;
 /// Reference points (at most, by a fixed stride) checked against the target's free space.
-pub const VERIFY_REFERENCE_SAMPLES: usize = 2000;
+const VERIFY_REFERENCE_SAMPLES: usize = 2000;
 /// Weight of the free-space violations in the verification score: `score = agreement -
 /// VIOLATION_WEIGHT (v_target + v_reference)`, each `v` the share of a cloud's checked points that
 /// fall into space the other sensor saw through ([`crate::visibility`]).
-pub const VIOLATION_WEIGHT: f64 = 3.0;
+pub(super) const VIOLATION_WEIGHT: f64 = 3.0;
 /// Pairs of the best pose and a close contender polished by the full ICP before the result is
 /// called ambiguous or not (see the verification in [`calibrate_targetless`](super::calibrate_targetless)).
-pub const MAX_POLISHED: usize = 4;
+pub(super) const MAX_POLISHED: usize = 4;
 /// A challenger (beyond `max_translation`) makes the result ambiguous when it scores at least
 /// this share of the best (a pose within range does from [`AMBIGUITY_RATIO`]).
-pub const CHALLENGER_AMBIGUITY_RATIO: f64 = 0.9;
+pub(super) const CHALLENGER_AMBIGUITY_RATIO: f64 = 0.9;
 /// Target points (at most, by a fixed stride) scored in the screening of every hypothesis.
-pub const SCREEN_SAMPLES: usize = 300;
+const SCREEN_SAMPLES: usize = 300;
 /// Reference points (at most, by a fixed stride) checked against the target's free space in the
 /// screening.
-pub const SCREEN_REFERENCE_SAMPLES: usize = 700;
+const SCREEN_REFERENCE_SAMPLES: usize = 700;
 /// Distinct hypotheses (best screening scores) that go on to the full verification.
-pub const SCREEN_KEEP: usize = 12;
+pub(super) const SCREEN_KEEP: usize = 12;
 /// The result is ambiguous when a distinct pose scores at least this share of the best. At 0.8,
 /// two adversarial rooms and corners whose runner-up scored 78-79 % came back 107-120 degrees
 /// off; the real pairs' runner-ups score at most 70 %.
-pub const AMBIGUITY_RATIO: f64 = 0.75;
+pub(super) const AMBIGUITY_RATIO: f64 = 0.75;
 
 /// Options of the quick ICP of the screening (the first stage of the verification), for a
 /// plane-pair hypothesis or a ground-sweep one (wider first distance: the start is up to half a

@@ -43,7 +43,7 @@ pub use paper::{
 };
 pub use poles::{
     poles_scene, PolesOptions, MAX_POLE_RADIUS, POLES_MAX_TILT_DEG, POLES_RANGE_NOISE, POLE_BAND,
-    POLE_LENGTH, POLE_MIN_ANGLE_DEG, POLE_MIN_AXIS_Z, POLE_PAINT, POLE_SPACING_RANGE,
+    POLE_LENGTH, POLE_MIN_ANGLE_DEG, POLE_MIN_AXIS_Z, POLE_SPACING_RANGE,
 };
 pub use street::{
     corridor_scene, street_scene, wide_angle_model, Side, StreetOptions, KERB_HEIGHT,

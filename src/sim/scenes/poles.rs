@@ -27,11 +27,6 @@ pub const POLE_BAND: (f64, f64) = (0.5, 2.5);
 pub const POLES_MAX_TILT_DEG: f64 = 15.0;
 /// Largest pole radius accepted, metres.
 pub const MAX_POLE_RADIUS: f64 = 1.0;
-/// Pole paint outside the band.
-pub const POLE_PAINT: IntensityRange = IntensityRange {
-    min: 30.0,
-    max: 80.0,
-};
 
 /// Options of [`poles_scene`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -126,7 +121,7 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
             IntensityRange::RETROREFLECTIVE,
         )?;
         cylinders.push(c);
-        shapes.push(Shape::cylinder(c, POLE_PAINT));
+        shapes.push(Shape::cylinder(c, IntensityRange::POLE));
     }
     let tilt = options.max_tilt_deg.to_radians();
     let mut sensor_pose = |y: f64| {
@@ -152,7 +147,7 @@ pub fn poles_scene(model: &BeamModel, options: &PolesOptions) -> Result<Scene> {
         let y = side * (0.5 * spacing + uniform(&mut rng, 1.5, 2.5));
         let x = d + uniform(&mut rng, -0.5, 1.0);
         let post = Cylinder::new(Point3::new(x + 0.05, y, 0.0), Vector3::z(), 2.0, 0.03)?;
-        shapes.push(Shape::cylinder(post, POLE_PAINT));
+        shapes.push(Shape::cylinder(post, IntensityRange::POLE));
         let sign =
             Rectangle::centered(Point3::new(x, y, 2.2), Vector3::y(), Vector3::z(), 0.6, 0.6)?;
         shapes.push(Shape::rectangle(sign, IntensityRange::RETROREFLECTIVE));

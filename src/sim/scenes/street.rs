@@ -4,9 +4,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{
-    pose, rectangle_shapes, reference_planes, scan_pair, uniform, Pole, Scene, POLE_PAINT,
-};
+use super::{pose, rectangle_shapes, reference_planes, scan_pair, uniform, Pole, Scene};
 use crate::error::{Error, Result};
 use crate::geometry::Plane;
 use crate::sim::shapes::{Cuboid, Cylinder, IntensityRange, Rectangle, Shape};
@@ -269,7 +267,11 @@ fn street_shapes(rectangles: &[Rectangle], boxes: &[Cuboid], cylinders: &[Cylind
             .iter()
             .map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER)),
     );
-    shapes.extend(cylinders.iter().map(|c| Shape::cylinder(*c, POLE_PAINT)));
+    shapes.extend(
+        cylinders
+            .iter()
+            .map(|c| Shape::cylinder(*c, IntensityRange::POLE)),
+    );
     shapes
 }
 
