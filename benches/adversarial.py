@@ -39,24 +39,6 @@ TRANS_TOL = 0.10  # m
 ALL_METHODS = ("auto", "planes", "targetless", "poles")
 OUTCOMES = ("solved", "wrong", "refused_right", "refused_solvable", "error")
 
-#: Cheap attributes of a result worth printing next to a wrong case.
-RESULT_ATTRS = (
-    "method",
-    "converged",
-    "termination",
-    "ambiguous",
-    "hypothesis_margin",
-    "ordering_margin",
-    "used_up",
-    "matched_planes",
-    "agreement",
-    "best_score",
-    "second_score",
-    "sweep",
-    "triplet",
-    "icp_fitness",
-)
-
 
 def pose_errors(truth: np.ndarray, est: np.ndarray) -> tuple[float, float]:
     """(rotation angle of R_true^T R_est in rad, |translation of inv(T_true) T_est| in m)."""
@@ -82,21 +64,33 @@ def _plain(value: Any) -> Any:
 
 
 def result_attributes(result: Any) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name in RESULT_ATTRS:
-        try:
-            value = _plain(getattr(result, name, None))
-        except Exception:  # an attribute that raises is not worth failing the bench over
-            value = None
-        if value is not None:
-            out[name] = value
-    weakest = getattr(result, "weakest_translation", None)
-    if weakest is not None:
-        try:
-            out["weakest_translation_share"] = float(weakest[1])
-        except (TypeError, ValueError, IndexError):
-            pass
-    return out
+    """Cheap attributes of a result worth printing next to a wrong case."""
+    details, refinement = result.details, result.refinement
+    values: dict[str, Any] = {
+        "method": result.method,
+        "converged": refinement.converged,
+        "termination": refinement.termination,
+    }
+    if result.method == "planes":
+        values.update(
+            ordering_margin=details.ordering["margin"], used_up=details.ordering["used_up"]
+        )
+    elif result.method == "poles":
+        values.update(ambiguous=details.ambiguous, hypothesis_margin=details.margin)
+    else:
+        values.update(
+            ambiguous=details.ambiguous,
+            matched_planes=len(details.planes_reference),
+            agreement=details.agreement,
+            best_score=details.best_score,
+            second_score=details.second_score,
+            sweep=details.sweep,
+            triplet=details.triplet,
+            icp_fitness=None if details.icp is None else details.icp["fitness"],
+            weakest_translation_share=float(details.weakest_translation[1]),
+        )
+    plain = {name: _plain(value) for name, value in values.items()}
+    return {name: value for name, value in plain.items() if value is not None}
 
 
 def run_scene(

@@ -71,20 +71,23 @@ def hypothesis_scores(seed: int = 3) -> None:
         f"{'#':>2} {'matches (ref, tgt, sign)':>28} {'axis rms':>9} {'ground deg':>10} "
         f"{'ground m':>9} {'overlap':>7} {'score':>7} {'rot to chosen':>13}"
     )
-    for k, h in enumerate(result.hypotheses or []):
-        mark = "*" if k == result.chosen_hypothesis else " "
+    details = result.details
+    assert isinstance(details, lidarcal.PoleDetails)
+    for k, h in enumerate(details.hypotheses):
+        mark = "*" if k == details.chosen else " "
         matches = ", ".join(f"({a},{b},{s:+d})" for a, b, s in h["matches"])
-        ground = h["ground_angle_deg"]
+        ground = h["ground_angle"]
         offset = h["ground_offset"]
+        to_chosen = np.degrees(errors(h["reference_from_target"], result.transform)[0])
         print(
             f"{k:>2}{mark}{matches:>28} {h['axis_rms']:>9.4f} "
-            f"{(ground if ground is not None else float('nan')):>10.1f} "
+            f"{(np.degrees(ground) if ground is not None else float('nan')):>10.1f} "
             f"{(offset if offset is not None else float('nan')):>9.2f} {h['overlap']:>7.3f} "
-            f"{h['score']:>7.2f} {h['rotation_to_chosen_deg']:>12.1f}d"
+            f"{h['score']:>7.2f} {to_chosen:>12.1f}d"
         )
     print(
-        f"chosen #{result.chosen_hypothesis}, margin {result.hypothesis_margin:.2f} "
-        f"(ambiguous: {result.ambiguous}); error {1e3 * r_err:.2f} mrad, {100 * t_err:.2f} cm"
+        f"chosen #{details.chosen}, margin {details.margin:.2f} "
+        f"(ambiguous: {details.ambiguous}); error {1e3 * r_err:.2f} mrad, {100 * t_err:.2f} cm"
     )
 
 

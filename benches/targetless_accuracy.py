@@ -81,9 +81,12 @@ def run(reference: np.ndarray, target: np.ndarray) -> tuple[np.ndarray | None, s
     t0 = time.perf_counter()
     try:
         r = lidarcal.calibrate_targetless(reference, target)
+        d = r.details
+        assert isinstance(d, lidarcal.TargetlessDetails)
         note = (
-            f"planes={r.matched_planes} best={r.best_score:.3f} second={r.second_score:.3f} "
-            f"weakest={r.weakest_translation[1]:.3f} {r.timings['total']:.0f}ms"  # type: ignore[index]
+            f"planes={len(d.planes_reference)} best={d.best_score:.3f} "
+            f"second={d.second_score:.3f} weakest={d.weakest_translation[1]:.3f} "
+            f"{r.timings['total']:.0f}ms"
         )
         return r.transform, note, time.perf_counter() - t0
     except lidarcal.CalibrationError as e:

@@ -173,6 +173,10 @@ pub struct ReadmeDoctests;
 #[doc = include_str!("../docs/rust.md")]
 #[cfg(all(doctest, feature = "sim"))]
 pub struct RustPageDoctests;
+/// The Rust example of `docs/results.md`.
+#[doc = include_str!("../docs/results.md")]
+#[cfg(all(doctest, feature = "sim"))]
+pub struct ResultsPageDoctests;
 /// The Rust example of `docs/methods/auto_and_rig.md`.
 #[doc = include_str!("../docs/methods/auto_and_rig.md")]
 #[cfg(all(doctest, feature = "sim"))]

@@ -4,6 +4,7 @@ mod common;
 
 use common::{pose_errors, pose_rpy_deg, two_sensor_corner};
 use lidarcal::calib::planes::{calibrate_planes, PlanarOptions};
+use lidarcal::calib::Solver;
 use lidarcal::geometry::Plane;
 use lidarcal::lm::Loss;
 use lidarcal::Error;
@@ -27,15 +28,21 @@ fn any_mounting_is_recovered_without_initial_guess() {
             .unwrap_or_else(|e| panic!("pose {i}: {e}"));
         let (r, t) = pose_errors(truth, &result.reference_from_target);
         assert!(r < 2e-3 && t < 1e-2, "pose {i}: {r} rad, {t} m");
-        let report = result.report.as_ref().unwrap();
+        let report = result.details.report.as_ref().unwrap();
         assert!(report.converged());
-        assert!(!result.ordering.used_up);
-        assert!(result.ordering.margin > 0.05, "{:?}", result.ordering);
+        assert_eq!(result.refinement.solver, Solver::LevenbergMarquardt);
+        assert_eq!(result.refinement.cost, report.final_cost);
+        assert!(!result.details.ordering.used_up);
+        assert!(
+            result.details.ordering.margin > 0.05,
+            "{:?}",
+            result.details.ordering
+        );
         // The closed form alone is already close; the refinement does not make it worse.
         let (r0, t0) = pose_errors(truth, &result.initial_reference_from_target);
         assert!(r0 < 1e-2 && t0 < 0.1, "closed form {r0} {t0}");
         // Estimated thresholds reflect the 2 cm noise.
-        for th in result.distance_thresholds {
+        for th in result.details.distance_thresholds {
             assert!((0.04..0.09).contains(&th), "threshold {th}");
         }
         assert!(result.rmse.iter().all(|&e| e < 0.03), "{:?}", result.rmse);
@@ -76,7 +83,9 @@ fn robust_loss_path_agrees_with_sufficient_statistics() {
         },
     )
     .unwrap();
-    assert!(unrefined.report.is_none());
+    assert!(unrefined.details.report.is_none());
+    assert_eq!(unrefined.refinement.solver, Solver::ClosedForm);
+    assert!(unrefined.refinement.converged && unrefined.refinement.cost.is_nan());
     assert_eq!(
         unrefined.reference_from_target,
         unrefined.initial_reference_from_target
@@ -119,7 +128,7 @@ fn cube_corner_is_ambiguous_without_up_and_solved_with_it() {
         ..PlanarOptions::default()
     };
     let result = calibrate_planes(&reference, &target, &options).unwrap();
-    assert!(result.ordering.used_up);
+    assert!(result.details.ordering.used_up);
     let (r, t) = pose_errors(&truth, &result.reference_from_target);
     assert!(r < 2e-3 && t < 1e-2, "{r} {t}");
 }

@@ -123,7 +123,7 @@ fn radii_from_5_to_30_cm() {
         let (rk, tk) = errors(&scene.reference_from_target, &k);
         assert!(rk < 0.01 && tk < 0.05, "known radius {radius}: {rk} {tk}");
         assert!(r < 0.01 && t < 0.05, "radius {radius}: {r} {t}");
-        for estimate in &result.radii {
+        for estimate in &result.details.radii {
             assert!(
                 (estimate - radius).abs() < 0.25 * radius + 0.01,
                 "{radius} vs {estimate}"
@@ -190,7 +190,7 @@ fn a_bright_road_sign_is_rejected() {
         assert!(r < 0.05 && t < 0.1, "seed {seed}: {r} {t}");
         // The sign (last shape) never became a matched pole.
         let sign = scene.shapes.len() - 1;
-        for idx in &result.indices_reference {
+        for idx in &result.inliers_reference {
             assert!(idx
                 .iter()
                 .all(|&i| scene.reference.points[i].shape != Some(sign)));
@@ -242,9 +242,9 @@ fn three_poles_are_all_matched() {
     let (r, ri) = split(&reference);
     let (t, ti) = split(&target);
     let result = calibrate_poles(&r, &ri, &t, &ti, &velodyne()).unwrap();
-    assert_eq!(result.poles_reference.len(), 3);
+    assert_eq!(result.details.poles_reference.len(), 3);
     // 3 poles: 6 ordered target pairs x 4 signs for the base pair of reference poles.
-    assert_eq!(result.hypotheses.len(), 24);
+    assert_eq!(result.details.hypotheses.len(), 24);
     let truth = world_from_ref.inverse() * world_from_tgt;
     let e = result.reference_from_target.inverse() * truth;
     assert!(e.rotation.angle() < 0.005 && e.translation.vector.norm() < 0.02);
@@ -256,7 +256,7 @@ fn same_input_same_answer() {
     let a = run(&scene, &velodyne()).unwrap();
     let b = run(&scene, &velodyne()).unwrap();
     assert_eq!(a.reference_from_target, b.reference_from_target);
-    assert_eq!(a.hypotheses.len(), 8);
+    assert_eq!(a.details.hypotheses.len(), 8);
 }
 
 #[test]

@@ -48,7 +48,7 @@ fn auto_picks_the_corner_method_at_a_corner_and_targetless_on_a_street() {
     let mut options = MethodOptions::default();
     options.planes.up = Some((nalgebra::Vector3::z(), nalgebra::Vector3::z()));
     let c = calibrate(Cloud::new(&r), Cloud::new(&t), Method::Auto, &options).unwrap();
-    let (angle, dist) = pose_error(&corner.reference_from_target, c.reference_from_target());
+    let (angle, dist) = pose_error(&corner.reference_from_target, &c.reference_from_target);
     assert_eq!(c.method(), Method::Planes, "{angle} {dist}");
     assert!(angle < 0.1 && dist < 0.02, "{angle} {dist}");
 
@@ -61,10 +61,10 @@ fn auto_picks_the_corner_method_at_a_corner_and_targetless_on_a_street() {
         &MethodOptions::default(),
     )
     .unwrap();
-    let (angle, dist) = pose_error(&s.reference_from_target, c.reference_from_target());
+    let (angle, dist) = pose_error(&s.reference_from_target, &c.reference_from_target);
     assert_eq!(c.method(), Method::Targetless);
     assert!(angle < 0.1 && dist < 0.02, "{angle} {dist}");
-    assert!(c.covariance().is_some());
+    assert!(c.covariance.is_some());
 }
 
 #[cfg(feature = "sim")]
@@ -88,7 +88,7 @@ fn auto_tries_the_poles_only_with_intensity() {
     );
     let poles = with.unwrap();
     assert_eq!(poles.method(), Method::Poles);
-    let (angle, dist) = pose_error(&scene.reference_from_target, poles.reference_from_target());
+    let (angle, dist) = pose_error(&scene.reference_from_target, &poles.reference_from_target);
     // The pole method's usual accuracy on these scenes (tests/calib_poles.rs: median 0.29 deg /
     // 2 cm); this scene gives 0.25 deg / 2.0 cm.
     assert!(

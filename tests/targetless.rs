@@ -25,9 +25,10 @@ fn street(seed: u64, side: Side) -> (f64, f64) {
         &TargetlessOptions::default(),
     )
     .unwrap();
-    assert!(r.planes_reference.len() >= 2 && r.best_score > r.second_score);
-    assert!(r.covariance.is_some() && r.icp.is_some());
-    assert_eq!(r.planes_reference.len(), r.inliers_target.len());
+    let d = &r.details;
+    assert!(d.planes_reference.len() >= 2 && d.best_score > d.second_score);
+    assert!(r.covariance.is_some() && d.icp.is_some());
+    assert_eq!(d.planes_reference.len(), r.inliers_target.len());
     let stages: Vec<&str> = r.timings.stages.iter().map(|s| s.0).collect();
     assert_eq!(
         stages,
@@ -126,7 +127,7 @@ fn a_unit_three_metres_back_is_found_by_sliding_a_plane_pair() {
         &options,
     )
     .unwrap();
-    assert!(!r.triplet && !r.sweep);
+    assert!(!r.details.triplet && !r.details.sweep);
     let (angle, distance) = pose_error(&scene.reference_from_target, &r.reference_from_target);
     assert!(
         angle.to_degrees() < 0.1 && distance < 0.02,

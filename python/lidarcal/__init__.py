@@ -12,6 +12,11 @@ Calibration:
 * :func:`calibrate_targetless` -- from the planes of an ordinary scene (a street with facades),
   no target and no initial guess: plane pairs/triplets matched by their angles, verified and
   refined by point-to-plane ICP; refuses scenes that leave a direction unobserved.
+* Every method returns a :class:`CalibrationResult`: the fields all methods fill (``transform``,
+  ``check``, ``rmse``, ``inliers_reference``/``inliers_target`` per matched plane or pole,
+  ``covariance``, ``refinement`` -- a :class:`Refinement` -- and ``timings``) and the method's own
+  in ``details``, a :class:`PlanarDetails`, :class:`PoleDetails` or :class:`TargetlessDetails`;
+  the names are those of the Rust ``Calibration``.
 * :func:`calibrate` -- one entry point: ``method="auto"`` tries the corner, the targetless and
   (with intensity) the pole method and keeps the best; ``result.method`` names it.
 * :func:`calibrate_rig` -- several targets to one reference plus target-to-target edges, made
@@ -54,8 +59,12 @@ from lidarcal._lidarcal import (
     CheckReport,
     FileFormatError,
     Line,
+    PlanarDetails,
     Plane,
+    PoleDetails,
+    Refinement,
     RefineResult,
+    TargetlessDetails,
     __version__,
     calibrate_planes,
     calibrate_poles,
@@ -89,11 +98,15 @@ __all__ = [
     "CheckReport",
     "FileFormatError",
     "Line",
+    "PlanarDetails",
     "Plane",
+    "PoleDetails",
     "PoseGraphReport",
     "RefineResult",
+    "Refinement",
     "RigCalibration",
     "RigEdge",
+    "TargetlessDetails",
     "__version__",
     "calibrate",
     "calibrate_planes",

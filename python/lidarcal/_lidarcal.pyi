@@ -28,10 +28,14 @@ __all__ = [
     "CheckReport",
     "FileFormatError",
     "Line",
+    "PlanarDetails",
     "Plane",
+    "PoleDetails",
     "RefineResult",
+    "Refinement",
     "Scene",
     "Shape",
+    "TargetlessDetails",
     "__version__",
     "_defaults",
     "calibrate_auto",
@@ -220,39 +224,191 @@ class RefineResult:
     @property
     def covariance(self) -> _F64Array | None: ...
 
+_Solver = Literal["closed_form", "levenberg_marquardt", "icp", "verification", "scene_alignment"]
+
+@final
+class Refinement:
+    """The solver that produced the returned pose, and how it ended (Rust
+    ``calib::Refinement``)."""
+
+    @property
+    def solver(self) -> _Solver: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def cost(self) -> float:
+        """Final cost of Levenberg-Marquardt; NaN for the other solvers."""
+    @property
+    def termination(self) -> str: ...
+
+class _LmReport(TypedDict):
+    initial_cost: float
+    final_cost: float
+    iterations: int
+    evaluations: int
+    termination: str
+    hessian: _F64Array
+    residual_count: int
+
+class _IcpResult(TypedDict):
+    pose: _F64Array
+    iterations: int
+    converged: bool
+    correspondences: int
+    fitness: float
+    rmse: float
+    information: _F64Array
+    covariance: _F64Array | None
+
+class _Ordering(TypedDict):
+    scores: _F64Array
+    chosen: int
+    margin: float
+    used_up: bool
+
+class _Hypothesis(TypedDict):
+    matches: list[tuple[int, int, int]]
+    reference_from_target: _F64Array
+    axis_rms: float
+    ground_angle: float | None
+    ground_offset: float | None
+    overlap: float
+    score: float
+
+class _DetectedPole(TypedDict):
+    axis: _F64Array
+    radius: float
+    rms: float
+    indices: _I64Array
+    extent: tuple[float, float]
+
+class _RejectedCluster(TypedDict):
+    size: int
+    reason: str
+
+class _PoleExtraction(TypedDict):
+    intensity_threshold: float
+    bright_points: int
+    poles: list[_DetectedPole]
+    rejected: list[_RejectedCluster]
+
+class _PlaneFeature(TypedDict):
+    plane: _F64Array
+    voxels: _I64Array
+    centroid: _F64Array
+    extent: _F64Array
+
+@final
+class PlanarDetails:
+    """The corner method's own diagnostics (Rust ``calib::planes::PlanarDetails``)."""
+
+    @property
+    def planes_reference(self) -> _F64Array:
+        """(3, 4) matched planes ``[nx, ny, nz, d]`` in the reference frame."""
+    @property
+    def planes_target(self) -> _F64Array: ...
+    @property
+    def corners(self) -> _F64Array:
+        """(2, 3) the corner in the reference and in the target frame."""
+    @property
+    def ordering(self) -> _Ordering: ...
+    @property
+    def distance_thresholds(self) -> _F64Array: ...
+    @property
+    def report(self) -> _LmReport | None: ...
+
+@final
+class PoleDetails:
+    """The pole method's own diagnostics (Rust ``calib::poles::PoleDetails``)."""
+
+    @property
+    def poles_reference(self) -> _F64Array:
+        """(K, 6) matched axes ``[point, direction]`` in the reference frame."""
+    @property
+    def poles_target(self) -> _F64Array: ...
+    @property
+    def radii(self) -> _F64Array: ...
+    @property
+    def extractions(self) -> list[_PoleExtraction]: ...
+    @property
+    def hypotheses(self) -> list[_Hypothesis]:
+        """Every correspondence/sign hypothesis, in enumeration order; lower score is better."""
+    @property
+    def chosen(self) -> int: ...
+    @property
+    def margin(self) -> float: ...
+    @property
+    def ambiguous(self) -> bool: ...
+    @property
+    def report(self) -> _LmReport | None: ...
+
+@final
+class TargetlessDetails:
+    """The targetless method's own diagnostics (Rust ``calib::targetless::TargetlessDetails``)."""
+
+    @property
+    def planes_reference(self) -> _F64Array:
+        """(K, 4) matched planes ``[nx, ny, nz, d]`` in the reference frame."""
+    @property
+    def planes_target(self) -> _F64Array: ...
+    @property
+    def features(self) -> list[list[_PlaneFeature]]: ...
+    @property
+    def hypothesis_counts(self) -> tuple[int, int]: ...
+    @property
+    def verified(self) -> int: ...
+    @property
+    def triplet(self) -> bool: ...
+    @property
+    def sweep(self) -> bool: ...
+    @property
+    def best_score(self) -> float: ...
+    @property
+    def second_score(self) -> float: ...
+    @property
+    def agreement(self) -> float: ...
+    @property
+    def violations(self) -> tuple[float, float]:
+        """(target points in the reference's free space, reference points in the target's)."""
+    @property
+    def ambiguous(self) -> bool: ...
+    @property
+    def distance_thresholds(self) -> _F64Array: ...
+    @property
+    def report(self) -> _LmReport | None: ...
+    @property
+    def icp(self) -> _IcpResult | None: ...
+    @property
+    def weakest_translation(self) -> tuple[_F64Array, float]:
+        """(direction in the reference frame, share of the translation information)."""
+    @property
+    def weakest_rotation(self) -> tuple[_F64Array, float]: ...
+    @property
+    def plane_translation_share(self) -> float: ...
+
 @final
 class CalibrationResult:
     """The result of a calibration: ``transform`` maps target points into the reference frame.
 
-    Common to all methods: ``method`` ("planes", "poles" or "targetless"), ``transform``,
-    ``initial_transform``, ``converged``, ``iterations``, ``cost``, ``termination``, ``rmse``,
-    ``inlier_counts``, ``inliers_reference``, ``inliers_target``, ``covariance``, ``timings``.
-    Attributes of one method are None for the others (``planes_reference``,
-    ``planes_target`` and ``distance_thresholds`` serve the corner and the targetless method).
+    The fields every method fills, under the names of the Rust ``calib::Calibration`` (its
+    ``reference_from_target`` is ``transform`` here), and the method's own in ``details``
+    (see the results page of the documentation).
     """
 
     @property
     def method(self) -> Literal["planes", "poles", "targetless"]: ...
-    @property
-    def check(self) -> CheckReport: ...
     @property
     def transform(self) -> _F64Array:
         """(4, 4) ``reference_from_target``."""
     @property
     def initial_transform(self) -> _F64Array: ...
     @property
-    def converged(self) -> bool: ...
-    @property
-    def iterations(self) -> int: ...
-    @property
-    def cost(self) -> float: ...
-    @property
-    def termination(self) -> str: ...
+    def check(self) -> CheckReport: ...
     @property
     def rmse(self) -> _F64Array:
-        """(3,) per plane or (K,) per pole, metres."""
-    @property
-    def inlier_counts(self) -> _I64Array: ...
+        """(K,) per matched plane or pole, metres."""
     @property
     def inliers_reference(self) -> list[_I64Array]: ...
     @property
@@ -260,68 +416,11 @@ class CalibrationResult:
     @property
     def covariance(self) -> _F64Array | None: ...
     @property
+    def refinement(self) -> Refinement: ...
+    @property
     def timings(self) -> dict[str, float]: ...
-    # Planes only (None for poles).
     @property
-    def planes_reference(self) -> _F64Array | None: ...
-    @property
-    def planes_target(self) -> _F64Array | None: ...
-    @property
-    def ordering_scores(self) -> _F64Array | None: ...
-    @property
-    def ordering_margin(self) -> float | None: ...
-    @property
-    def used_up(self) -> bool | None: ...
-    @property
-    def corners(self) -> _F64Array | None: ...
-    @property
-    def distance_thresholds(self) -> _F64Array | None: ...
-    # Poles only (None for planes).
-    @property
-    def poles_reference(self) -> _F64Array | None:
-        """(K, 6) matched axes [point, direction] in the reference frame."""
-    @property
-    def poles_target(self) -> _F64Array | None: ...
-    @property
-    def pole_radii(self) -> _F64Array | None: ...
-    @property
-    def intensity_thresholds(self) -> _F64Array | None: ...
-    @property
-    def hypothesis_scores(self) -> _F64Array | None:
-        """(H,) score of every correspondence/sign hypothesis, lower is better."""
-    @property
-    def hypotheses(self) -> list[dict[str, Any]] | None: ...
-    @property
-    def chosen_hypothesis(self) -> int | None: ...
-    @property
-    def hypothesis_margin(self) -> float | None: ...
-    @property
-    def ambiguous(self) -> bool | None: ...
-    # Targetless only (None for the others).
-    @property
-    def matched_planes(self) -> int | None: ...
-    @property
-    def plane_counts(self) -> tuple[int, int] | None: ...
-    @property
-    def hypothesis_counts(self) -> tuple[int, int] | None: ...
-    @property
-    def best_score(self) -> float | None: ...
-    @property
-    def second_score(self) -> float | None: ...
-    @property
-    def agreement(self) -> float | None: ...
-    @property
-    def violations(self) -> tuple[float, float] | None:
-        """(target points in the reference's free space, reference points in the target's)."""
-    @property
-    def sweep(self) -> bool | None: ...
-    @property
-    def triplet(self) -> bool | None: ...
-    @property
-    def weakest_translation(self) -> tuple[_F64Array, float] | None:
-        """(direction in the reference frame, share of the translation information)."""
-    @property
-    def icp_fitness(self) -> float | None: ...
+    def details(self) -> PlanarDetails | PoleDetails | TargetlessDetails: ...
 
 def calibrate_targetless(
     reference: _ArrayLike,

@@ -242,7 +242,7 @@ def demo(
     )
     click.echo(f"  error     rotation {rot_err:.4f} deg, translation {100 * trans_err:.2f} cm")
     click.echo(
-        f"  converged {result.converged}, plane rmse "
+        f"  converged {result.refinement.converged}, plane rmse "
         f"{', '.join(f'{100 * r:.2f}' for r in result.rmse)} cm, "
         f"{result.timings['total']:.1f} ms"
     )

@@ -30,7 +30,12 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import numpy.typing as npt
 
-from lidarcal._lidarcal import CalibrationResult
+from lidarcal._lidarcal import (
+    CalibrationResult,
+    PlanarDetails,
+    PoleDetails,
+    TargetlessDetails,
+)
 
 F64Array = npt.NDArray[np.float64]
 
@@ -132,7 +137,7 @@ def to_dict(
         "quaternion_xyzw": quaternion_xyzw(rotation).tolist(),
         "rpy_rad": angles.tolist(),
         "rpy_deg": np.degrees(angles).tolist(),
-        "converged": bool(result.converged),
+        "converged": bool(result.refinement.converged),
         "rmse": _list(result.rmse),
     }
     cov = result.covariance
@@ -140,53 +145,65 @@ def to_dict(
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         out["std_translation_m"] = sd[:3].tolist()
         out["std_rotation_deg"] = np.degrees(sd[3:]).tolist()
+    refinement = result.refinement
     diagnostics: dict[str, Any] = {
-        "iterations": int(result.iterations),
-        "cost": float(result.cost),
-        "termination": result.termination,
-        "inlier_counts": _list(result.inlier_counts),
+        "solver": refinement.solver,
+        "iterations": int(refinement.iterations),
+        # NaN (a solver without a cost: ICP, none) would not survive a round trip: null.
+        "cost": None if math.isnan(refinement.cost) else float(refinement.cost),
+        "termination": refinement.termination,
+        "inlier_counts": [
+            [len(i) for i in result.inliers_reference],
+            [len(i) for i in result.inliers_target],
+        ],
         "timings_ms": dict(result.timings),
         "covariance": _list(cov),
     }
     if transform is not None:
         diagnostics["method_transform"] = own.tolist()
-    if result.method == "planes":
-        diagnostics.update(
-            planes_reference=_list(result.planes_reference),
-            planes_target=_list(result.planes_target),
-            ordering_scores=_list(result.ordering_scores),
-            ordering_margin=result.ordering_margin,
-            used_up=result.used_up,
-            distance_thresholds=_list(result.distance_thresholds),
-        )
-    elif result.method == "poles":
-        diagnostics.update(
-            poles_reference=_list(result.poles_reference),
-            poles_target=_list(result.poles_target),
-            pole_radii=_list(result.pole_radii),
-            intensity_thresholds=_list(result.intensity_thresholds),
-            hypothesis_scores=_list(result.hypothesis_scores),
-            hypothesis_margin=result.hypothesis_margin,
-            ambiguous=result.ambiguous,
-        )
-    elif result.method == "targetless":
-        weakest = result.weakest_translation
-        diagnostics.update(
-            planes_reference=_list(result.planes_reference),
-            planes_target=_list(result.planes_target),
-            matched_planes=result.matched_planes,
-            plane_counts=_list(result.plane_counts),
-            hypothesis_counts=_list(result.hypothesis_counts),
-            best_score=result.best_score,
-            second_score=result.second_score,
-            triplet=result.triplet,
-            weakest_translation_direction=None if weakest is None else _list(weakest[0]),
-            weakest_translation_share=None if weakest is None else float(weakest[1]),
-            icp_fitness=result.icp_fitness,
-        )
+    diagnostics.update(_details(result.details))
     out["diagnostics"] = diagnostics
     out["check"] = result.check.to_dict()
     return out
+
+
+def _details(details: PlanarDetails | PoleDetails | TargetlessDetails) -> dict[str, Any]:
+    """The method's own diagnostics, under the keys of the file format."""
+    if isinstance(details, PlanarDetails):
+        ordering = details.ordering
+        return dict(
+            planes_reference=_list(details.planes_reference),
+            planes_target=_list(details.planes_target),
+            ordering_scores=_list(ordering["scores"]),
+            ordering_margin=ordering["margin"],
+            used_up=ordering["used_up"],
+            distance_thresholds=_list(details.distance_thresholds),
+        )
+    if isinstance(details, PoleDetails):
+        return dict(
+            poles_reference=_list(details.poles_reference),
+            poles_target=_list(details.poles_target),
+            pole_radii=_list(details.radii),
+            intensity_thresholds=[e["intensity_threshold"] for e in details.extractions],
+            hypothesis_scores=[h["score"] for h in details.hypotheses],
+            hypothesis_margin=details.margin,
+            ambiguous=details.ambiguous,
+        )
+    direction, share = details.weakest_translation
+    icp = details.icp
+    return dict(
+        planes_reference=_list(details.planes_reference),
+        planes_target=_list(details.planes_target),
+        matched_planes=len(details.planes_reference),
+        plane_counts=[len(f) for f in details.features],
+        hypothesis_counts=list(details.hypothesis_counts),
+        best_score=details.best_score,
+        second_score=details.second_score,
+        triplet=details.triplet,
+        weakest_translation_direction=_list(direction),
+        weakest_translation_share=float(share),
+        icp_fitness=None if icp is None else icp["fitness"],
+    )
 
 
 def from_rpy(angles: npt.ArrayLike) -> F64Array:

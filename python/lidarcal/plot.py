@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from lidarcal._lidarcal import CalibrationResult
+from lidarcal._lidarcal import CalibrationResult, PoleDetails
 from lidarcal.export import rpy
 
 if TYPE_CHECKING:
@@ -70,20 +70,19 @@ def residuals(
     tgt = _xyz(target, "target")
     _xyz(reference, "reference")
     moved = _apply(np.asarray(result.transform), tgt)
+    details = result.details
+    features = (
+        details.poles_reference if isinstance(details, PoleDetails) else details.planes_reference
+    )
     out: list[F64Array] = []
-    planes = result.planes_reference
-    poles = result.poles_reference
     for k, idx in enumerate(result.inliers_target):
         pts = moved[np.asarray(idx, dtype=np.int64)]
-        if planes is not None and k < len(planes):
-            n, d = planes[k, :3], planes[k, 3]
-            out.append(pts @ n + d)
-        elif poles is not None and k < len(poles):
-            p, u = poles[k, :3], poles[k, 3:] / np.linalg.norm(poles[k, 3:])
+        if isinstance(details, PoleDetails):
+            p, u = features[k, :3], features[k, 3:] / np.linalg.norm(features[k, 3:])
             rel = pts - p
-            radial = np.linalg.norm(rel - np.outer(rel @ u, u), axis=1)
-            radius = result.pole_radii[k] if result.pole_radii is not None else 0.0
-            out.append(radial - radius)
+            out.append(np.linalg.norm(rel - np.outer(rel @ u, u), axis=1) - details.radii[k])
+        else:
+            out.append(pts @ features[k, :3] + features[k, 3])
     return np.concatenate(out) if out else np.zeros(0)
 
 

@@ -28,17 +28,18 @@
 //! )?;
 //! let truth = &scene.reference_from_target;
 //! let (angle, distance) =
-//!     lidarcal::geometry::pose_error(truth, result.reference_from_target());
+//!     lidarcal::geometry::pose_error(truth, &result.reference_from_target);
 //! assert!(angle.to_degrees() < 0.1 && distance < 0.02);
 //! println!("{} chose {}", Method::Auto.name(), result.method().name());
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
-use nalgebra::{Isometry3, Matrix6, Point3};
+use nalgebra::Point3;
 
-use crate::calib::planes::{calibrate_planes, PlanarCalibration, PlanarOptions};
-use crate::calib::poles::{calibrate_poles, PoleCalibration, PoleOptions};
-use crate::calib::targetless::{calibrate_targetless, TargetlessCalibration, TargetlessOptions};
+use crate::calib::planes::{calibrate_planes, PlanarOptions};
+use crate::calib::poles::{calibrate_poles, PoleOptions};
+use crate::calib::result::Calibration;
+use crate::calib::targetless::{calibrate_targetless, TargetlessOptions};
 use crate::check::CheckReport;
 use crate::geometry::pose_error;
 use crate::{Error, FailureKind, Result};
@@ -139,55 +140,6 @@ impl<'a> Cloud<'a> {
     }
 }
 
-/// What one method returned.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Calibration {
-    /// The corner method's result.
-    Planes(Box<PlanarCalibration>),
-    /// The targetless method's result.
-    Targetless(Box<TargetlessCalibration>),
-    /// The pole method's result.
-    Poles(Box<PoleCalibration>),
-}
-
-impl Calibration {
-    /// The method that produced it (never [`Method::Auto`]).
-    pub fn method(&self) -> Method {
-        match self {
-            Calibration::Planes(_) => Method::Planes,
-            Calibration::Targetless(_) => Method::Targetless,
-            Calibration::Poles(_) => Method::Poles,
-        }
-    }
-
-    /// `reference_from_target`.
-    pub fn reference_from_target(&self) -> &Isometry3<f64> {
-        match self {
-            Calibration::Planes(c) => &c.reference_from_target,
-            Calibration::Targetless(c) => &c.reference_from_target,
-            Calibration::Poles(c) => &c.reference_from_target,
-        }
-    }
-
-    /// The final check's report (consistent for every returned result).
-    pub fn check(&self) -> &CheckReport {
-        match self {
-            Calibration::Planes(c) => &c.check,
-            Calibration::Targetless(c) => &c.check,
-            Calibration::Poles(c) => &c.check,
-        }
-    }
-
-    /// Covariance of the left-perturbation tangent `[rho, phi]`, when the method gives one.
-    pub fn covariance(&self) -> Option<Matrix6<f64>> {
-        match self {
-            Calibration::Planes(c) => c.covariance,
-            Calibration::Targetless(c) => c.covariance,
-            Calibration::Poles(c) => c.covariance,
-        }
-    }
-}
-
 /// The options of every method, and how [`Method::Auto`] compares their results.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MethodOptions {
@@ -239,16 +191,17 @@ fn run_one(
     options: &MethodOptions,
 ) -> Result<Calibration> {
     match method {
-        Method::Planes => calibrate_planes(reference.points, target.points, &options.planes)
-            .map(|c| Calibration::Planes(Box::new(c))),
+        Method::Planes => {
+            calibrate_planes(reference.points, target.points, &options.planes).map(|c| c.into_any())
+        }
         Method::Targetless => {
             calibrate_targetless(reference.points, target.points, &options.targetless)
-                .map(|c| Calibration::Targetless(Box::new(c)))
+                .map(|c| c.into_any())
         }
         Method::Poles => match (reference.intensity, target.intensity) {
             (Some(ri), Some(ti)) => {
                 calibrate_poles(reference.points, ri, target.points, ti, &options.poles)
-                    .map(|c| Calibration::Poles(Box::new(c)))
+                    .map(|c| c.into_any())
             }
             _ => Err(Error::InvalidInput(
                 "the pole method needs the intensity of both clouds".into(),
@@ -312,13 +265,13 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     }
     // Every result passed its method's check. Rank them by the certificate (the noise scale of
     // the agreement comes from the clouds alone, so the reports compare directly).
-    let reports: Vec<&CheckReport> = results.iter().map(Calibration::check).collect();
+    let reports: Vec<&CheckReport> = results.iter().map(|c| &c.check).collect();
     let scores: Vec<f64> = reports.iter().map(|r| certificate_score(r)).collect();
     // Whether results `i` and `j` differ by more than either check can detect.
     let disagree = |i: usize, j: usize| {
         let (angle, distance) = pose_error(
-            results[i].reference_from_target(),
-            results[j].reference_from_target(),
+            &results[i].reference_from_target,
+            &results[j].reference_from_target,
         );
         let (a, b) = (reports[i], reports[j]);
         angle > a.detectable_rotation.max(b.detectable_rotation)
@@ -336,8 +289,8 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     for (i, other) in results.iter().enumerate() {
         let (chosen, rival) = (reports[pick], reports[i]);
         let (angle, distance) = pose_error(
-            results[pick].reference_from_target(),
-            other.reference_from_target(),
+            &results[pick].reference_from_target,
+            &other.reference_from_target,
         );
         let rotation_tolerance = chosen.detectable_rotation.max(rival.detectable_rotation);
         let translation_tolerance = chosen

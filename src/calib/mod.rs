@@ -9,18 +9,25 @@
 //!   scenes that leave a degree of freedom unobserved.
 //! * [`method`]: one entry point over the three ([`calibrate`]; [`Method::Auto`] keeps the
 //!   best-fitting certified result).
+//! * [`result`]: what every method returns ([`Calibration`]: the common fields, and the method's
+//!   own in `details`).
 //! * [`rig`]: the calibration of a whole rig ([`calibrate_rig`]), made consistent by a small pose
 //!   graph ([`crate::pose_graph`]).
 //!
-//! The entry points of [`method`] and [`rig`] are re-exported here.
+//! The entry points of [`method`] and [`rig`] and the types of [`result`] are re-exported here.
 
 pub mod method;
 pub mod planes;
 pub mod poles;
+pub mod result;
 pub mod rig;
 pub mod targetless;
 
-pub use method::{calibrate, Calibration, Cloud, Method, MethodOptions};
+pub use method::{calibrate, Cloud, Method, MethodOptions};
+pub use result::{
+    Calibration, Details, MethodDetails, PlanarCalibration, PoleCalibration, Refinement, Solver,
+    TargetlessCalibration,
+};
 pub use rig::{calibrate_rig, RigCalibration, RigOptions};
 
 use std::time::Instant;

@@ -23,7 +23,8 @@
 
 use nalgebra::{Isometry3, Matrix6, Vector6};
 
-use crate::calib::method::{calibrate, Calibration, Cloud, Method, MethodOptions};
+use crate::calib::method::{calibrate, Cloud, Method, MethodOptions};
+use crate::calib::result::Calibration;
 use crate::icp::SurfaceCloud;
 use crate::pose_graph::{
     edge_error, refine_pose_graph, PoseGraphEdge, PoseGraphOptions, PoseGraphReport,
@@ -55,7 +56,7 @@ fn default_information() -> Matrix6<f64> {
 /// 1 cm / 0.1 degree when the method gives none.
 pub fn edge_information(result: &Calibration) -> Matrix6<f64> {
     let Some(cov) = result
-        .covariance()
+        .covariance
         .filter(|c| c.iter().all(|v| v.is_finite()))
     else {
         return default_information();
@@ -265,7 +266,7 @@ impl<'n> Pairs<'n> {
             match calibrate(clouds[0], clouds[b], options.method, &options.methods) {
                 Ok(c) => {
                     self.direct
-                        .push((self.names[b].to_string(), *c.reference_from_target()));
+                        .push((self.names[b].to_string(), c.reference_from_target));
                     self.measured.push((0, b, c));
                 }
                 Err(Error::Calibration { kind, message }) => self.fail(0, b, Some(kind), message),
@@ -296,7 +297,7 @@ impl<'n> Pairs<'n> {
                 };
                 let shared = surface.overlap(
                     clouds[b].points(),
-                    c.reference_from_target(),
+                    &c.reference_from_target,
                     options.methods.agreement_distance,
                 );
                 if shared < options.min_pair_overlap {
@@ -329,11 +330,11 @@ fn initial_poses(
         for (a, b, c) in measured {
             match (poses[*a], poses[*b]) {
                 (Some(pa), None) => {
-                    poses[*b] = Some(pa * c.reference_from_target());
+                    poses[*b] = Some(pa * c.reference_from_target);
                     changed = true;
                 }
                 (None, Some(pb)) => {
-                    poses[*a] = Some(pb * c.reference_from_target().inverse());
+                    poses[*a] = Some(pb * c.reference_from_target.inverse());
                     changed = true;
                 }
                 _ => {}
@@ -410,7 +411,7 @@ fn refine(
             let edge = PoseGraphEdge {
                 a: index[a]?,
                 b: index[b]?,
-                a_from_b: *c.reference_from_target(),
+                a_from_b: c.reference_from_target,
                 information: edge_information(&c),
             };
             Some(((a, b, c), edge))
@@ -423,12 +424,12 @@ fn refine(
     let mut edges = Vec::with_capacity(measured.len());
     for ((a, b, c), g) in measured.into_iter().zip(&graph) {
         if let (Some(pa), Some(pb)) = (refined_of(a), refined_of(b)) {
-            let err = edge_error(c.reference_from_target(), &pa, &pb);
+            let err = edge_error(&c.reference_from_target, &pa, &pb);
             edges.push(RigEdge {
                 a: names[a].to_string(),
                 b: names[b].to_string(),
                 method: c.method(),
-                a_from_b: *c.reference_from_target(),
+                a_from_b: c.reference_from_target,
                 information: g.information,
                 rotation_residual_deg: err.fixed_rows::<3>(3).norm().to_degrees(),
                 translation_residual_m: err.fixed_rows::<3>(0).norm(),

@@ -1,526 +1,26 @@
-//! Python wrappers of the calibration methods and their result object.
+//! Python wrappers of the calibration methods, the rig and the pose graph (their result object
+//! is in `result.rs`).
 
 use nalgebra::{Isometry3, Vector3};
-use numpy::ndarray::{Ix1, Ix2};
-use numpy::{PyArray1, PyArray2};
+use numpy::PyArray2;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::arrays::{self, row_major, to_numpy};
+use super::arrays;
+use super::result::{matrix4, CalibrationResult};
 use super::run;
-use crate::calib::method::{self, Calibration, Cloud, Method, MethodOptions};
-use crate::calib::planes::{
-    calibrate_planes as rs_calibrate_planes, PlanarCalibration, PlanarOptions,
-};
-use crate::calib::poles::{
-    calibrate_poles as rs_calibrate_poles, AxisFit, PoleCalibration, PoleOptions, Vendor,
-};
+use crate::calib::method::{self, Cloud, Method, MethodOptions};
+use crate::calib::planes::{calibrate_planes as rs_calibrate_planes, PlanarOptions};
+use crate::calib::poles::{calibrate_poles as rs_calibrate_poles, AxisFit, PoleOptions, Vendor};
 use crate::calib::rig::{self, RigOptions};
 use crate::calib::targetless::{
-    calibrate_targetless as rs_calibrate_targetless, TargetlessCalibration, TargetlessOptions,
+    calibrate_targetless as rs_calibrate_targetless, TargetlessOptions,
 };
-use crate::calib::Timings;
-use crate::geometry::Plane;
-use crate::lm::{LmOptions, LmReport, Loss};
+use crate::lm::{LmOptions, Loss};
 use crate::pose_graph::{
     refine_pose_graph as rs_refine_pose_graph, PoseGraphEdge, PoseGraphOptions,
 };
-
-/// What a calibration method returned (the crate's own sum of the three results).
-type Inner = Calibration;
-
-/// The result of a calibration: `transform` maps target points into the reference frame.
-#[pyclass(frozen, module = "lidarcal", name = "CalibrationResult")]
-pub(crate) struct CalibrationResult {
-    inner: Inner,
-}
-
-impl CalibrationResult {
-    fn planes(&self) -> Option<&PlanarCalibration> {
-        match &self.inner {
-            Inner::Planes(p) => Some(p),
-            _ => None,
-        }
-    }
-    fn poles(&self) -> Option<&PoleCalibration> {
-        match &self.inner {
-            Inner::Poles(p) => Some(p),
-            _ => None,
-        }
-    }
-    fn targetless(&self) -> Option<&TargetlessCalibration> {
-        match &self.inner {
-            Inner::Targetless(p) => Some(p),
-            _ => None,
-        }
-    }
-    fn pose(&self) -> &Isometry3<f64> {
-        match &self.inner {
-            Inner::Planes(p) => &p.reference_from_target,
-            Inner::Poles(p) => &p.reference_from_target,
-            Inner::Targetless(p) => &p.reference_from_target,
-        }
-    }
-    fn initial_pose(&self) -> &Isometry3<f64> {
-        match &self.inner {
-            Inner::Planes(p) => &p.initial_reference_from_target,
-            Inner::Poles(p) => &p.initial_reference_from_target,
-            Inner::Targetless(p) => &p.initial_reference_from_target,
-        }
-    }
-    fn report(&self) -> Option<&LmReport> {
-        match &self.inner {
-            Inner::Planes(p) => p.report.as_ref(),
-            Inner::Poles(p) => p.report.as_ref(),
-            Inner::Targetless(p) => p.report.as_ref(),
-        }
-    }
-    fn stage_timings(&self) -> &Timings {
-        match &self.inner {
-            Inner::Planes(p) => &p.timings,
-            Inner::Poles(p) => &p.timings,
-            Inner::Targetless(p) => &p.timings,
-        }
-    }
-    fn rmse_values(&self) -> Vec<f64> {
-        match &self.inner {
-            Inner::Planes(p) => p.rmse.to_vec(),
-            Inner::Poles(p) => p.pole_rmse.clone(),
-            Inner::Targetless(p) => p.rmse.clone(),
-        }
-    }
-}
-
-fn lines_k6<'py>(
-    py: Python<'py>,
-    lines: &[crate::geometry::Line],
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let data = lines
-        .iter()
-        .flat_map(|l| {
-            [
-                l.point.x,
-                l.point.y,
-                l.point.z,
-                l.direction.x,
-                l.direction.y,
-                l.direction.z,
-            ]
-        })
-        .collect();
-    to_numpy(py, Ix2(lines.len(), 6), data)
-}
-
-/// (K, 4) rows [nx, ny, nz, d].
-fn planes_array<'py>(py: Python<'py>, planes: &[Plane]) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let data = planes
-        .iter()
-        .flat_map(|p| p.coefficients().as_slice().to_vec())
-        .collect();
-    to_numpy(py, Ix2(planes.len(), 4), data)
-}
-
-/// A pose as a (4, 4) row-major array.
-pub(crate) fn matrix4<'py>(
-    py: Python<'py>,
-    pose: &Isometry3<f64>,
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    to_numpy(py, Ix2(4, 4), row_major(&pose.to_homogeneous()))
-}
-
-#[pymethods]
-impl CalibrationResult {
-    /// "planes", "poles" or "targetless".
-    #[getter]
-    fn method(&self) -> &'static str {
-        self.inner.method().name()
-    }
-    /// The final check's report (a CheckReport; always "consistent" for a returned result).
-    #[getter]
-    fn check(&self) -> super::check::CheckReport {
-        super::check::CheckReport {
-            inner: self.inner.check().clone(),
-        }
-    }
-    /// (4, 4) reference_from_target: p_ref = R @ p_tgt + t.
-    #[getter]
-    fn transform<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        matrix4(py, self.pose())
-    }
-    /// (4, 4) the closed-form estimate before the Levenberg–Marquardt refinement.
-    #[getter]
-    fn initial_transform<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        matrix4(py, self.initial_pose())
-    }
-    /// True when the refinement converged (or was not requested).
-    #[getter]
-    fn converged(&self) -> bool {
-        self.report().is_none_or(|r| r.converged())
-    }
-    /// LM iterations (0 without refinement).
-    #[getter]
-    fn iterations(&self) -> usize {
-        self.report().map_or(0, |r| r.iterations)
-    }
-    /// Final cost 1/2 sum r^2 of the refinement (NaN without refinement).
-    #[getter]
-    fn cost(&self) -> f64 {
-        self.report().map_or(f64::NAN, |r| r.final_cost)
-    }
-    /// Why the refinement stopped ("none" without refinement).
-    #[getter]
-    fn termination(&self) -> &'static str {
-        self.report().map_or("none", |r| r.termination.as_str())
-    }
-    /// RMS residual (metres) per matched feature: (3,) point-to-plane per plane, or (K,)
-    /// point-to-axis per pole; both clouds together.
-    #[getter]
-    fn rmse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let v = self.rmse_values();
-        to_numpy(py, Ix1(v.len()), v)
-    }
-    /// (3, 4) (corner) or (K, 4) (targetless) matched planes [nx, ny, nz, d] in the reference
-    /// frame (normals toward the sensor); None for poles.
-    #[getter]
-    fn planes_reference<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        match &self.inner {
-            Inner::Planes(p) => planes_array(py, &p.planes_reference).map(Some),
-            Inner::Targetless(p) => planes_array(py, &p.planes_reference).map(Some),
-            Inner::Poles(_) => Ok(None),
-        }
-    }
-    /// Matched planes in the target frame, row i matching planes_reference[i]; None for poles.
-    #[getter]
-    fn planes_target<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        match &self.inner {
-            Inner::Planes(p) => planes_array(py, &p.planes_target).map(Some),
-            Inner::Targetless(p) => planes_array(py, &p.planes_target).map(Some),
-            Inner::Poles(_) => Ok(None),
-        }
-    }
-    /// Number of matched planes (targetless only, else None).
-    #[getter]
-    fn matched_planes(&self) -> Option<usize> {
-        self.targetless().map(|t| t.planes_reference.len())
-    }
-    /// (2,) planes extracted from the reference and the target cloud (targetless only).
-    #[getter]
-    fn plane_counts(&self) -> Option<(usize, usize)> {
-        self.targetless()
-            .map(|t| (t.features[0].len(), t.features[1].len()))
-    }
-    /// (enumerated, distinct) plane-pair/triplet hypotheses (targetless only).
-    #[getter]
-    fn hypothesis_counts(&self) -> Option<(usize, usize)> {
-        self.targetless()
-            .map(|t| (t.hypotheses[0], t.hypotheses[1]))
-    }
-    /// Verification score of the best hypothesis: agreement minus 3 x the free-space violations
-    /// (targetless only).
-    #[getter]
-    fn best_score(&self) -> Option<f64> {
-        self.targetless().map(|t| t.best_score)
-    }
-    /// Best verification score of a hypothesis ending at a different pose (targetless only).
-    #[getter]
-    fn second_score(&self) -> Option<f64> {
-        self.targetless().map(|t| t.second_score)
-    }
-    /// Share of the checked target points within 25 cm of a reference point at the best
-    /// hypothesis (targetless only).
-    #[getter]
-    fn agreement(&self) -> Option<f64> {
-        self.targetless().map(|t| t.agreement)
-    }
-    /// (target points in the reference's free space, reference points in the target's) as shares
-    /// of the checked points, at the best hypothesis (targetless only).
-    #[getter]
-    fn violations(&self) -> Option<(f64, f64)> {
-        self.targetless()
-            .map(|t| (t.violations[0], t.violations[1]))
-    }
-    /// Whether the winning hypothesis came from the ground sweep (targetless only).
-    #[getter]
-    fn sweep(&self) -> Option<bool> {
-        self.targetless().map(|t| t.sweep)
-    }
-    /// Whether the winning hypothesis was a plane triplet rather than a pair (targetless only).
-    #[getter]
-    fn triplet(&self) -> Option<bool> {
-        self.targetless().map(|t| t.triplet)
-    }
-    /// ((3,) direction in the reference frame, share of the information) of the least
-    /// constrained translation (targetless only).
-    #[getter]
-    fn weakest_translation<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<Option<(Bound<'py, PyArray1<f64>>, f64)>> {
-        self.targetless()
-            .map(|t| {
-                let (v, share) = t.weakest_translation;
-                Ok((to_numpy(py, Ix1(3), v.as_slice().to_vec())?, share))
-            })
-            .transpose()
-    }
-    /// Fraction of the sampled target points with an ICP correspondence at the final distance
-    /// (targetless with ICP only).
-    #[getter]
-    fn icp_fitness(&self) -> Option<f64> {
-        self.targetless().and_then(|t| t.icp.map(|r| r.fitness))
-    }
-    /// (2, K) points per matched feature: row 0 reference, row 1 target (K = 3 planes or the
-    /// matched poles).
-    #[getter]
-    fn inlier_counts<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
-        let (a, b) = self.index_sets();
-        let k = a.len();
-        let counts: Vec<i64> = a.iter().chain(b).map(|v| v.len() as i64).collect();
-        numpy::ndarray::Array2::from_shape_vec((2, k), counts)
-            .map(|a| numpy::IntoPyArray::into_pyarray(a, py))
-            .unwrap_or_else(|_| PyArray2::zeros(py, (2, k), false))
-    }
-    /// int64 arrays: indices of each matched plane's (or pole's) points in the reference cloud.
-    #[getter]
-    fn inliers_reference<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, PyArray1<i64>>> {
-        self.index_sets()
-            .0
-            .iter()
-            .map(|v| PyArray1::from_iter(py, v.iter().map(|&i| i as i64)))
-            .collect()
-    }
-    /// int64 arrays: indices of each matched plane's (or pole's) points in the target cloud.
-    #[getter]
-    fn inliers_target<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, PyArray1<i64>>> {
-        self.index_sets()
-            .1
-            .iter()
-            .map(|v| PyArray1::from_iter(py, v.iter().map(|&i| i as i64)))
-            .collect()
-    }
-    /// (3,) RMS normal misalignment (rad) of each cyclic plane correspondence; lower is better.
-    /// None for poles (see hypothesis_scores).
-    #[getter]
-    fn ordering_scores<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        self.planes()
-            .map(|p| to_numpy(py, Ix1(3), p.ordering.scores.to_vec()))
-            .transpose()
-    }
-    /// Runner-up score minus the chosen one (rad): how clearly the planes were matched; None for
-    /// poles.
-    #[getter]
-    fn ordering_margin(&self) -> Option<f64> {
-        self.planes().map(|p| p.ordering.margin)
-    }
-    /// True when the geometry was ambiguous and the `up` tie-break chose the correspondence;
-    /// None for poles.
-    #[getter]
-    fn used_up(&self) -> Option<bool> {
-        self.planes().map(|p| p.ordering.used_up)
-    }
-    /// (2, 3) the corner point in the reference and in the target frame; None for poles.
-    #[getter]
-    fn corners<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.planes()
-            .map(|p| {
-                let [a, b] = p.corners;
-                to_numpy(py, Ix2(2, 3), vec![a.x, a.y, a.z, b.x, b.y, b.z])
-            })
-            .transpose()
-    }
-    /// (2,) inlier thresholds used for the reference and the target cloud (metres); None for poles.
-    #[getter]
-    fn distance_thresholds<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        let t = match &self.inner {
-            Inner::Planes(p) => p.distance_thresholds,
-            Inner::Targetless(p) => p.distance_thresholds,
-            Inner::Poles(_) => return Ok(None),
-        };
-        to_numpy(py, Ix1(2), t.to_vec()).map(Some)
-    }
-    /// (K, 6) matched pole axes [point, unit direction] in the reference frame; None for planes.
-    #[getter]
-    fn poles_reference<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.poles()
-            .map(|p| lines_k6(py, &p.poles_reference))
-            .transpose()
-    }
-    /// (K, 6) matched pole axes in the target frame, directions signed to match
-    /// poles_reference; None for planes.
-    #[getter]
-    fn poles_target<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.poles()
-            .map(|p| lines_k6(py, &p.poles_target))
-            .transpose()
-    }
-    /// (K,) radius of each matched pole (metres; given, or the mean of both clouds' estimates;
-    /// 0 with axis_fit="line"); None for planes.
-    #[getter]
-    fn pole_radii<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        self.poles()
-            .map(|p| to_numpy(py, Ix1(p.radii.len()), p.radii.clone()))
-            .transpose()
-    }
-    /// (2,) intensity thresholds used for the reference and the target cloud; None for planes.
-    #[getter]
-    fn intensity_thresholds<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        self.poles()
-            .map(|p| {
-                let v = p
-                    .extractions
-                    .iter()
-                    .map(|e| e.intensity_threshold)
-                    .collect();
-                to_numpy(py, Ix1(2), v)
-            })
-            .transpose()
-    }
-    /// (H,) score of every correspondence/sign hypothesis (lower is better), in enumeration
-    /// order; None for planes.
-    #[getter]
-    fn hypothesis_scores<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        self.poles()
-            .map(|p| {
-                let v: Vec<f64> = p.hypotheses.iter().map(|h| h.score).collect();
-                to_numpy(py, Ix1(v.len()), v)
-            })
-            .transpose()
-    }
-    /// Every hypothesis as a dict: matches [(reference pole, target pole, sign)], axis_rms (m),
-    /// ground_angle_deg, ground_offset (m) (None without a plane), overlap, score,
-    /// rotation_to_chosen_deg; None for planes.
-    #[getter]
-    fn hypotheses<'py>(&self, py: Python<'py>) -> PyResult<Option<Vec<Bound<'py, PyDict>>>> {
-        let Some(p) = self.poles() else {
-            return Ok(None);
-        };
-        let chosen = p.reference_from_target;
-        let mut out = Vec::with_capacity(p.hypotheses.len());
-        for h in &p.hypotheses {
-            let d = PyDict::new(py);
-            let matches: Vec<(usize, usize, i8)> = h.matches.clone();
-            d.set_item("matches", matches)?;
-            d.set_item("axis_rms", h.axis_rms)?;
-            d.set_item("ground_angle_deg", h.ground_angle.map(f64::to_degrees))?;
-            d.set_item("ground_offset", h.ground_offset)?;
-            d.set_item("overlap", h.overlap)?;
-            d.set_item("score", h.score)?;
-            let rel = h.reference_from_target.inverse() * chosen;
-            d.set_item("rotation_to_chosen_deg", rel.rotation.angle().to_degrees())?;
-            out.push(d);
-        }
-        Ok(Some(out))
-    }
-    /// Index of the chosen hypothesis; None for planes.
-    #[getter]
-    fn chosen_hypothesis(&self) -> Option<usize> {
-        self.poles().map(|p| p.chosen)
-    }
-    /// Score of the best hypothesis reaching a different transform minus the chosen one's
-    /// (inf when all agree); None for planes.
-    #[getter]
-    fn hypothesis_margin(&self) -> Option<f64> {
-        self.poles().map(|p| p.margin)
-    }
-    /// Poles: True when the margin is below 1 (a near-tie, though not refused). Targetless: True
-    /// when a distinct pose verified almost as well as the best (only returned with
-    /// refuse_ambiguous=False). None for the corner method.
-    #[getter]
-    fn ambiguous(&self) -> Option<bool> {
-        match &self.inner {
-            Inner::Poles(p) => Some(p.ambiguous),
-            Inner::Targetless(t) => Some(t.ambiguous),
-            Inner::Planes(_) => None,
-        }
-    }
-    /// (6, 6) covariance of the left-perturbation tangent [rho, phi] (m, rad), or None.
-    #[getter]
-    fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        let c = match &self.inner {
-            Inner::Planes(p) => p.covariance,
-            Inner::Poles(p) => p.covariance,
-            Inner::Targetless(p) => p.covariance,
-        };
-        c.map(|c| to_numpy(py, Ix2(6, 6), row_major(&c)))
-            .transpose()
-    }
-    /// Milliseconds per stage, plus "total".
-    #[getter]
-    fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let d = PyDict::new(py);
-        let t = self.stage_timings();
-        for (name, ms) in &t.stages {
-            d.set_item(*name, *ms)?;
-        }
-        d.set_item("total", t.total())?;
-        Ok(d)
-    }
-    fn __repr__(&self) -> String {
-        let pose = self.pose();
-        let t = pose.translation.vector;
-        let rpy = pose.rotation.euler_angles();
-        let rmse: Vec<String> = self
-            .rmse_values()
-            .iter()
-            .map(|r| format!("{r:.4}"))
-            .collect();
-        let extra = match &self.inner {
-            Inner::Planes(_) => String::new(),
-            Inner::Targetless(t) => format!(
-                ", matched_planes={}, best_score={:.3}, second_score={:.3}, ambiguous={}",
-                t.planes_reference.len(),
-                t.best_score,
-                t.second_score,
-                if t.ambiguous { "True" } else { "False" }
-            ),
-            Inner::Poles(p) => format!(
-                ", poles={}, hypothesis_margin={:.2}, ambiguous={}",
-                p.poles_reference.len(),
-                p.margin,
-                if p.ambiguous { "True" } else { "False" }
-            ),
-        };
-        format!(
-            "CalibrationResult(method='{}', converged={}, rotation_rpy_deg=[{:.3}, {:.3}, {:.3}], \
-             translation_m=[{:.4}, {:.4}, {:.4}], rmse_m=[{}]{extra}, iterations={}, \
-             total_ms={:.2})",
-            self.method(),
-            if self.converged() { "True" } else { "False" },
-            rpy.0.to_degrees(),
-            rpy.1.to_degrees(),
-            rpy.2.to_degrees(),
-            t.x,
-            t.y,
-            t.z,
-            rmse.join(", "),
-            self.iterations(),
-            self.stage_timings().total()
-        )
-    }
-}
-
-impl CalibrationResult {
-    fn index_sets(&self) -> (&[Vec<usize>], &[Vec<usize>]) {
-        match &self.inner {
-            Inner::Planes(p) => (&p.inliers_reference, &p.inliers_target),
-            Inner::Poles(p) => (&p.indices_reference, &p.indices_target),
-            Inner::Targetless(p) => (&p.inliers_reference, &p.inliers_target),
-        }
-    }
-}
 
 fn up_arg(up: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(Vector3<f64>, Vector3<f64>)>> {
     let Some(up) = up else {
@@ -624,9 +124,7 @@ fn calibrate_planes(
     let inner = run(py, move || {
         rs_calibrate_planes(&reference, &target, &options)
     })?;
-    Ok(CalibrationResult {
-        inner: Inner::Planes(Box::new(inner)),
-    })
+    Ok(inner.into())
 }
 
 /// Calibrates reference_from_target from two (or more) non-parallel taped poles.
@@ -700,9 +198,7 @@ fn calibrate_poles(
             &options,
         )
     })?;
-    Ok(CalibrationResult {
-        inner: Inner::Poles(Box::new(inner)),
-    })
+    Ok(inner.into())
 }
 
 /// Calibrates reference_from_target from the planes of an ordinary scene (a street), without an
@@ -759,9 +255,7 @@ fn calibrate_targetless(
     let inner = run(py, move || {
         rs_calibrate_targetless(&reference, &target, &options)
     })?;
-    Ok(CalibrationResult {
-        inner: Inner::Targetless(Box::new(inner)),
-    })
+    Ok(inner.into())
 }
 
 /// The options `calibrate(method="auto")` and `calibrate_rig` pass on: `seed` to every method,
@@ -1021,7 +515,6 @@ fn rqe(py: Python<'_>, points: &Bound<'_, PyAny>, sigma: f64) -> PyResult<f64> {
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<CalibrationResult>()?;
     m.add_function(wrap_pyfunction!(calibrate_planes, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_poles, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_targetless, m)?)?;

@@ -7,8 +7,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::arrays::{self, to_numpy};
-use super::calib::matrix4;
 use super::defaults::table;
+use super::result::matrix4;
 use super::run;
 use crate::check::{check as rs_check, CheckOptions, CheckReport as Report};
 use crate::geometry::isometry_from_matrix;

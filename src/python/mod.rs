@@ -20,6 +20,7 @@ mod defaults;
 mod io;
 mod kernels;
 mod ransac;
+mod result;
 mod sim;
 
 create_exception!(
@@ -105,6 +106,7 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     io::register(m)?;
     kernels::register(m)?;
     ransac::register(m)?;
+    result::register(m)?;
     calib::register(m)?;
     check::register(m)?;
     sim::register(m)?;

@@ -741,9 +741,9 @@ def test_case_names_are_unique() -> None:
 def test_good_scenes_calibrate() -> None:
     """The scenes the battery corrupts are good ones: unmodified, they calibrate."""
     ref, tgt = corner()
-    assert lidarcal.calibrate_planes(ref, tgt).converged
+    assert lidarcal.calibrate_planes(ref, tgt).refinement.converged
     pr, pt = poles()
-    assert lidarcal.calibrate_poles(pr, pt).converged
+    assert lidarcal.calibrate_poles(pr, pt).refinement.converged
 
 
 def test_time_budget_stops_a_pathological_clustering() -> None:

@@ -12,6 +12,12 @@ import reference as ref
 from eval_data import require
 
 
+def planar(result: lidarcal.CalibrationResult) -> lidarcal.PlanarDetails:
+    d = result.details
+    assert isinstance(d, lidarcal.PlanarDetails)
+    return d
+
+
 def two_sensor_corner(
     t_true: np.ndarray, seed: int, sigma: float = 0.02, clutter: int = 800
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -43,14 +49,19 @@ def test_recovers_ground_truth(k: int) -> None:
     result = lidarcal.calibrate_planes(reference, target.astype(np.float32))
     r_err, t_err = errors(t_true, result.transform)
     assert r_err < 2e-3 and t_err < 1e-2, (r_err, t_err)
-    assert result.converged and result.method == "planes"
+    assert result.refinement.converged and result.method == "planes"
+    assert result.refinement.solver == "levenberg_marquardt" and result.refinement.iterations > 0
     assert result.transform.shape == (4, 4) and result.initial_transform.shape == (4, 4)
-    assert result.planes_reference.shape == (3, 4) and result.inlier_counts.shape == (2, 3)
+    d = planar(result)
+    assert d.planes_reference.shape == (3, 4) and len(result.inliers_target) == 3
+    assert d.corners.shape == (2, 3) and d.ordering["scores"].shape == (3,)
+    assert d.report is not None and d.report["final_cost"] == result.refinement.cost
     assert result.covariance is not None and result.covariance.shape == (6, 6)
     assert set(result.timings) >= {"planes", "match", "refine", "total"}
-    assert "CalibrationResult(method='planes', converged=True" in repr(result)
+    assert "CalibrationResult(method='planes'" in repr(result)
+    assert "Refinement(solver='levenberg_marquardt', converged=True" in repr(result)
     # Matched planes agree under the result: target planes map onto the reference planes.
-    for p_ref, p_tgt in zip(result.planes_reference, result.planes_target, strict=True):
+    for p_ref, p_tgt in zip(d.planes_reference, d.planes_target, strict=True):
         n = result.transform[:3, :3] @ p_tgt[:3]
         assert float(n @ p_ref[:3]) > np.cos(np.radians(1.0))
 
@@ -65,8 +76,8 @@ def test_matches_numpy_pipeline_from_the_same_planes() -> None:
     # Hand the reference the target planes shuffled: it must find the same correspondence.
     shuffle = [2, 0, 1]
     initial, refined, perm = ref.planar_pipeline(
-        result.planes_reference,
-        result.planes_target[shuffle],
+        planar(result).planes_reference,
+        planar(result).planes_target[shuffle],
         pts_ref,
         [pts_tgt[i] for i in shuffle],
     )
@@ -99,7 +110,7 @@ def test_cube_corner_needs_up() -> None:
         lidarcal.calibrate_planes(reference, target)
     up_target = t_true[:3, :3].T @ np.array([0.0, 0.0, 1.0])
     result = lidarcal.calibrate_planes(reference, target, up=[[0, 0, 1.0], up_target])
-    assert result.used_up
+    assert planar(result).ordering["used_up"]
     r_err, t_err = errors(t_true, result.transform)
     assert r_err < 2e-3 and t_err < 1e-2
 
@@ -140,5 +151,5 @@ def test_real_pair_against_the_authors_result() -> None:
     result = lidarcal.calibrate_planes(reference, target)
     r_err, t_err = errors(truth, result.transform)
     assert np.degrees(r_err) < 2.0 and t_err < 0.08, (np.degrees(r_err), t_err)
-    assert result.converged
+    assert result.refinement.converged
     assert np.all(result.rmse < 0.05)

@@ -47,30 +47,35 @@ def test_twenty_scenes_accuracy(twenty: list[tuple[float, float]]) -> None:
 def test_result_attributes_and_hypotheses() -> None:
     scene = sim.poles_scene(seed=3, radius=0.1)
     result = lidarcal.calibrate_poles(scene.reference, scene.target, vendor="velodyne")
-    assert result.method == "poles" and result.converged
+    assert result.method == "poles" and result.refinement.converged
+    assert result.refinement.solver in ("levenberg_marquardt", "scene_alignment")
     assert result.transform.shape == (4, 4) and result.initial_transform.shape == (4, 4)
-    assert result.poles_reference is not None and result.poles_reference.shape == (2, 6)
-    assert result.poles_target is not None and result.poles_target.shape == (2, 6)
-    radii = result.pole_radii
-    assert radii is not None and np.all(np.abs(radii - 0.1) < 0.02), radii
-    scores = result.hypothesis_scores
-    assert scores is not None and scores.shape == (8,)
-    chosen = result.chosen_hypothesis
-    assert chosen is not None and scores[chosen] == scores.min()
-    margin = result.hypothesis_margin
-    assert margin is not None and margin > 1.0 and result.ambiguous is False
-    hyps = result.hypotheses
-    assert hyps is not None and len(hyps) == 8
-    assert {"matches", "axis_rms", "ground_angle_deg", "overlap", "score"} <= set(hyps[0])
-    # Planar-only attributes are None for poles.
-    assert result.planes_reference is None and result.corners is None
-    assert result.ordering_margin is None and result.used_up is None
+    details = result.details
+    assert isinstance(details, lidarcal.PoleDetails)
+    assert details.poles_reference.shape == (2, 6) and details.poles_target.shape == (2, 6)
+    assert np.all(np.abs(details.radii - 0.1) < 0.02), details.radii
+    hyps = details.hypotheses
+    assert len(hyps) == 8
+    assert set(hyps[0]) == {
+        "matches",
+        "reference_from_target",
+        "axis_rms",
+        "ground_angle",
+        "ground_offset",
+        "overlap",
+        "score",
+    }
+    scores = [h["score"] for h in hyps]
+    assert scores[details.chosen] == min(scores)
+    assert details.margin > 1.0 and details.ambiguous is False
+    assert details.report is not None and details.report["iterations"] > 0
+    assert [len(e["poles"]) for e in details.extractions] == [2, 2]
     assert result.rmse.shape == (2,) and np.all(result.rmse < 0.02)
-    assert result.inlier_counts.shape == (2, 2)
+    assert len(result.inliers_reference) == len(result.inliers_target) == 2
     assert "method='poles'" in repr(result)
     # Matched axes agree under the result.
     t = result.transform
-    for a, b in zip(result.poles_reference, result.poles_target, strict=True):
+    for a, b in zip(details.poles_reference, details.poles_target, strict=True):
         assert float((t[:3, :3] @ b[3:]) @ a[3:]) > np.cos(np.radians(1.0))
 
 
@@ -127,9 +132,12 @@ def test_thresholds_and_radius_options() -> None:
         result = lidarcal.calibrate_poles(scene.reference, scene.target, **kwargs)  # type: ignore[arg-type]
         assert errors(scene.reference_from_target, result.transform)[0] < 0.01, kwargs
     result = lidarcal.calibrate_poles(scene.reference, scene.target, pole_radius=0.08)
-    assert result.pole_radii is not None and np.allclose(result.pole_radii, 0.08)
-    thresholds = lidarcal.calibrate_poles(scene.reference, scene.target).intensity_thresholds
-    assert thresholds is not None and np.all((thresholds > 80) & (thresholds < 235))
+    assert isinstance(result.details, lidarcal.PoleDetails)
+    assert np.allclose(result.details.radii, 0.08)
+    details = lidarcal.calibrate_poles(scene.reference, scene.target).details
+    assert isinstance(details, lidarcal.PoleDetails)
+    thresholds = np.array([e["intensity_threshold"] for e in details.extractions])
+    assert np.all((thresholds > 80) & (thresholds < 235))
 
 
 def test_errors() -> None:
@@ -168,12 +176,12 @@ def test_errors() -> None:
         lidarcal.metrics.rqe(reference, 0.0)
 
 
-def test_planes_result_has_no_pole_attributes() -> None:
+def test_planes_result_has_planar_details() -> None:
     rng = np.random.default_rng(0)
     cloud, _ = ref.corner_cloud(rng, 2500, 200, 0.01)
     result = lidarcal.calibrate_planes(cloud, cloud)
-    assert result.poles_reference is None and result.hypothesis_scores is None
-    assert result.ambiguous is None and result.pole_radii is None
+    assert isinstance(result.details, lidarcal.PlanarDetails)
+    assert not hasattr(result, "poles_reference") and not hasattr(result.details, "radii")
 
 
 @pytest.mark.parametrize(("model", "seed"), [("os128", 2), ("vlp16", 0)])

@@ -207,7 +207,7 @@ def test_overlay_and_residuals(corner_files: tuple) -> None:
     ref, tgt = lidarcal.read_points(ref_path), lidarcal.read_points(tgt_path)
     result = lidarcal.calibrate_planes(ref, tgt, up=[0, 0, 1])
     res = residuals(ref, tgt, result)
-    assert len(res) == int(np.sum(result.inlier_counts[1]))
+    assert len(res) == sum(len(i) for i in result.inliers_target)
     assert np.sqrt(np.mean(res**2)) < 0.03
     fig = overlay(ref, tgt, result)
     assert len(fig.axes) == 6

@@ -42,11 +42,13 @@
 //!    the pose passes through [`crate::check`] ([`PlanarOptions::check`], by default
 //!    [`CheckOptions::fitted`]).
 
-use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::{Stopwatch, Timings};
+pub use super::result::PlanarCalibration;
+use super::result::Refinement;
+use super::Stopwatch;
 use crate::budget::Deadline;
-use crate::check::{certify, CheckOptions, CheckReport};
+use crate::check::{certify, CheckOptions};
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::Plane;
@@ -169,37 +171,21 @@ pub struct Ordering {
     pub used_up: bool,
 }
 
-/// Result of [`calibrate_planes`].
+/// The corner method's own diagnostics: [`PlanarCalibration::details`].
 #[derive(Debug, Clone, PartialEq)]
-pub struct PlanarCalibration {
-    /// The final check's report (its verdict is always consistent: other poses are refused).
-    pub check: CheckReport,
-    /// The calibrated `reference_from_target`.
-    pub reference_from_target: Isometry3<f64>,
-    /// The closed-form estimate (Kabsch + corner translation) before refinement.
-    pub initial_reference_from_target: Isometry3<f64>,
+pub struct PlanarDetails {
     /// Matched planes, reference frame (row `i` matches `planes_target[i]`).
     pub planes_reference: [Plane; 3],
     /// Matched planes, target frame.
     pub planes_target: [Plane; 3],
-    /// Inlier indices into the reference cloud, per matched plane.
-    pub inliers_reference: [Vec<usize>; 3],
-    /// Inlier indices into the target cloud, per matched plane.
-    pub inliers_target: [Vec<usize>; 3],
     /// The corner (intersection of the three planes) in each frame.
     pub corners: [Point3<f64>; 2],
-    /// RMS point-to-plane residual per matched plane at the result (both clouds together).
-    pub rmse: [f64; 3],
     /// The plane correspondence.
     pub ordering: Ordering,
     /// Inlier thresholds used for the reference and the target cloud.
     pub distance_thresholds: [f64; 2],
     /// The refinement's report (`None` when `refine` was off).
     pub report: Option<LmReport>,
-    /// Covariance of the left-perturbation tangent `[rho; phi]` of the result (least-squares loss).
-    pub covariance: Option<Matrix6<f64>>,
-    /// Stage timings.
-    pub timings: Timings,
 }
 
 /// Estimates a cloud's inlier threshold as described in the module docs.
@@ -432,20 +418,23 @@ pub fn calibrate_planes(
         ..
     } = matched;
     Ok(PlanarCalibration {
-        check,
         reference_from_target: pose,
         initial_reference_from_target: initial,
-        planes_reference: planes_ref,
-        planes_target: planes_tgt,
-        inliers_reference: inliers_ref,
-        inliers_target: inliers_tgt,
-        corners,
-        rmse,
-        ordering,
-        distance_thresholds: thresholds,
-        report,
+        check,
+        rmse: rmse.to_vec(),
+        inliers_reference: inliers_ref.into(),
+        inliers_target: inliers_tgt.into(),
         covariance,
+        refinement: Refinement::from_lm(report.as_ref()),
         timings: clock.finish(),
+        details: PlanarDetails {
+            planes_reference: planes_ref,
+            planes_target: planes_tgt,
+            corners,
+            ordering,
+            distance_thresholds: thresholds,
+            report,
+        },
     })
 }
 

@@ -64,9 +64,9 @@ pub(super) struct MatchedPoles {
     /// The given radius (cylinder fits), else the mean of the two clouds' estimates.
     pub(super) radii: Vec<f64>,
     /// Indices of each pole's points in the reference cloud.
-    pub(super) indices_reference: Vec<Vec<usize>>,
+    pub(super) inliers_reference: Vec<Vec<usize>>,
     /// Indices of each pole's points in the target cloud.
-    pub(super) indices_target: Vec<Vec<usize>>,
+    pub(super) inliers_target: Vec<Vec<usize>>,
 }
 
 impl MatchedPoles {
@@ -79,8 +79,8 @@ impl MatchedPoles {
         let mut poles_reference = Vec::new();
         let mut poles_target = Vec::new();
         let mut radii = Vec::new();
-        let mut indices_reference = Vec::new();
-        let mut indices_target = Vec::new();
+        let mut inliers_reference = Vec::new();
+        let mut inliers_target = Vec::new();
         for &(i, k, s) in matches {
             let (pr, pt) = (&clouds.poles_ref[i], &clouds.poles_tgt[k]);
             poles_reference.push(pr.axis);
@@ -89,15 +89,15 @@ impl MatchedPoles {
                 Some(r) if options.axis_fit == AxisFit::Cylinder => r,
                 _ => 0.5 * (pr.radius + pt.radius),
             });
-            indices_reference.push(pr.indices.clone());
-            indices_target.push(pt.indices.clone());
+            inliers_reference.push(pr.indices.clone());
+            inliers_target.push(pt.indices.clone());
         }
         MatchedPoles {
             poles_reference,
             poles_target,
             radii,
-            indices_reference,
-            indices_target,
+            inliers_reference,
+            inliers_target,
         }
     }
 }

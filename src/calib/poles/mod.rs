@@ -124,34 +124,25 @@ use self::options::{check_cloud, check_options};
 use self::scene::settle;
 use self::score::Scorer;
 
-use nalgebra::{Isometry3, Matrix6, Point3};
+use nalgebra::Point3;
 
-use super::{Stopwatch, Timings};
+pub use super::result::PoleCalibration;
+use super::result::{Refinement, Solver};
+use super::Stopwatch;
 use crate::budget::Deadline;
-use crate::check::CheckReport;
 use crate::error::Result;
 use crate::geometry::Line;
 use crate::lm::LmReport;
 
-/// Result of [`calibrate_poles`].
+/// The pole method's own diagnostics: [`PoleCalibration::details`].
 #[derive(Debug, Clone, PartialEq)]
-pub struct PoleCalibration {
-    /// The final check's report (its verdict is always consistent: other poses are refused).
-    pub check: CheckReport,
-    /// The calibrated `reference_from_target`.
-    pub reference_from_target: Isometry3<f64>,
-    /// The closed-form estimate of the chosen hypothesis before refinement.
-    pub initial_reference_from_target: Isometry3<f64>,
+pub struct PoleDetails {
     /// Matched pole axes in the reference frame.
     pub poles_reference: Vec<Line>,
     /// Matched pole axes in the target frame (directions signed to match the reference's).
     pub poles_target: Vec<Line>,
     /// Radius of each matched pole (mean of the two clouds' estimates, or the given radius).
     pub radii: Vec<f64>,
-    /// Indices of each matched pole's points in the reference cloud.
-    pub indices_reference: Vec<Vec<usize>>,
-    /// Indices of each matched pole's points in the target cloud.
-    pub indices_target: Vec<Vec<usize>>,
     /// The poles extracted from each cloud (reference, target).
     pub extractions: [PoleExtraction; 2],
     /// Every hypothesis scored, in enumeration order.
@@ -163,16 +154,9 @@ pub struct PoleCalibration {
     pub margin: f64,
     /// The margin is below 1.
     pub ambiguous: bool,
-    /// RMS point-to-axis residual at the result (metres), all poles and both directions.
-    pub rmse: f64,
-    /// The same per matched pole.
-    pub pole_rmse: Vec<f64>,
-    /// The chosen hypothesis's refinement report.
+    /// The chosen hypothesis's Levenberg–Marquardt report (its pose is the result unless the
+    /// scene settled it: [`Calibration::refinement`](crate::calib::Calibration::refinement)).
     pub report: Option<LmReport>,
-    /// Covariance of the left-perturbation tangent `[rho; phi]` (least-squares loss).
-    pub covariance: Option<Matrix6<f64>>,
-    /// Stage timings.
-    pub timings: Timings,
 }
 
 /// Calibrates `reference_from_target` from taped poles seen by both sensors (see the module
@@ -234,31 +218,36 @@ pub fn calibrate_poles(
     check_pole_fit(&pole_rmse, &matched.radii, options.axis_fit)?;
     let report = reports[chosen];
     let covariance = report.as_ref().and_then(|r| r.covariance());
-    let rmse = best.axis_rms;
     let initial = starts[chosen];
     clock.lap("choose");
 
     // Step 7: the check, and the scene's settling of a pole pose it refuses.
-    let (pose, pole_rmse, check) = settle(&clouds, &best.matches, pose, pole_rmse, options)?;
+    let settled = settle(&clouds, &best.matches, pose, pole_rmse, options)?;
+    let refinement = match settled.scene_aligned {
+        false => Refinement::from_lm(report.as_ref()),
+        true => Refinement::without_iterations(Solver::SceneAlignment),
+    };
     clock.lap("certify");
     Ok(PoleCalibration {
-        check,
-        reference_from_target: pose,
+        reference_from_target: settled.pose,
         initial_reference_from_target: initial,
-        poles_reference: matched.poles_reference,
-        poles_target: matched.poles_target,
-        radii: matched.radii,
-        indices_reference: matched.indices_reference,
-        indices_target: matched.indices_target,
-        extractions: [ext_ref, ext_tgt],
-        ambiguous: margin < AMBIGUITY_MARGIN,
-        hypotheses,
-        chosen,
-        margin,
-        rmse,
-        pole_rmse,
-        report,
+        check: settled.check,
+        rmse: settled.pole_rmse,
+        inliers_reference: matched.inliers_reference,
+        inliers_target: matched.inliers_target,
         covariance,
+        refinement,
         timings: clock.finish(),
+        details: PoleDetails {
+            poles_reference: matched.poles_reference,
+            poles_target: matched.poles_target,
+            radii: matched.radii,
+            extractions: [ext_ref, ext_tgt],
+            ambiguous: margin < AMBIGUITY_MARGIN,
+            hypotheses,
+            chosen,
+            margin,
+            report,
+        },
     })
 }

@@ -18,15 +18,15 @@ pub(super) const SCENE_REFINE_DISTANCE: f64 = 0.2;
 /// The final check of the pole pose (`pole_rmse` is its per-pole RMS); when the check refuses
 /// it, the check's re-alignment on the whole scene is taken instead if it stays within
 /// [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`], the poles of `matches` still lie within
-/// [`MAX_POLE_RMSE`] of their axes and it passes the check (cylinder fits only). Returns the pose,
-/// its per-pole RMS and the check's report, or the first refusal.
+/// [`MAX_POLE_RMSE`] of their axes and it passes the check (cylinder fits only). Returns the
+/// settled pose, or the first refusal.
 pub(super) fn settle(
     clouds: &Clouds<'_>,
     matches: &[(usize, usize, i8)],
     pose: Isometry3<f64>,
     pole_rmse: Vec<f64>,
     options: &PoleOptions,
-) -> Result<(Isometry3<f64>, Vec<f64>, CheckReport)> {
+) -> Result<Settled> {
     // The poles hold the pose only as well as a few hundred tape points can: two near-parallel
     // axes leave the height along them and the tilt loosely held (4-8 cm and up to 1.5 degrees
     // off in 1000 adversarial scenes with 2-3 cm noise), which the check then refuses. The
@@ -38,8 +38,13 @@ pub(super) fn settle(
     // 2.7 mrad / 1.35 cm against 3.1 mrad / 1.5 cm).
     let pair = PreparedPair::new(clouds.reference, clouds.target, &options.check)?;
     let first = pair.check(&pose)?;
-    let (pose, pole_rmse, check) = match first.refusal() {
-        None => (pose, pole_rmse, first),
+    let settled = match first.refusal() {
+        None => Settled {
+            pose,
+            pole_rmse,
+            check: first,
+            scene_aligned: false,
+        },
         Some(refused) => {
             // A centroid line's residuals include the pole's thickness (up to 25 cm allowed):
             // they cannot tell whether the poles still fit, and the scene then moved one of 20
@@ -57,10 +62,26 @@ pub(super) fn settle(
                 return Err(refused);
             }
             match pair.check(&aligned)? {
-                c if c.failure.is_none() => (aligned, rms, c),
+                c if c.failure.is_none() => Settled {
+                    pose: aligned,
+                    pole_rmse: rms,
+                    check: c,
+                    scene_aligned: true,
+                },
                 _ => return Err(refused),
             }
         }
     };
-    Ok((pose, pole_rmse, check))
+    Ok(settled)
+}
+
+/// The pose [`settle`] returns.
+pub(super) struct Settled {
+    pub(super) pose: Isometry3<f64>,
+    /// RMS point-to-axis residual of each matched pole at `pose`.
+    pub(super) pole_rmse: Vec<f64>,
+    /// The check's report of `pose`.
+    pub(super) check: CheckReport,
+    /// `pose` is the check's re-alignment of the pole pose.
+    pub(super) scene_aligned: bool,
 }

@@ -129,36 +129,25 @@ use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Veri
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
-use super::{Stopwatch, Timings};
-use crate::check::CheckReport;
+pub use super::result::TargetlessCalibration;
+use super::result::{Refinement, Solver};
+use super::Stopwatch;
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::Plane;
 use crate::icp::IcpResult;
 use crate::lm::LmReport;
 
-/// Result of [`calibrate_targetless`].
+/// The targetless method's own diagnostics: [`TargetlessCalibration::details`].
 #[derive(Debug, Clone, PartialEq)]
-pub struct TargetlessCalibration {
-    /// The final check's report (its verdict is always consistent: other poses are refused).
-    pub check: CheckReport,
-    /// The calibrated `reference_from_target`.
-    pub reference_from_target: Isometry3<f64>,
-    /// The winning hypothesis (planes only, before any refinement).
-    pub initial_reference_from_target: Isometry3<f64>,
+pub struct TargetlessDetails {
     /// The matched planes in the reference frame (row `i` matches `planes_target[i]`).
     pub planes_reference: Vec<Plane>,
     /// The matched planes in the target frame.
     pub planes_target: Vec<Plane>,
-    /// Indices into the reference input of each matched plane's points.
-    pub inliers_reference: Vec<Vec<usize>>,
-    /// Indices into the target input of each matched plane's points.
-    pub inliers_target: Vec<Vec<usize>>,
-    /// RMS point-to-plane residual of each matched plane at the result (both clouds).
-    pub rmse: Vec<f64>,
     /// Planes extracted from the reference and the target cloud.
     pub features: [Vec<PlaneFeature>; 2],
     /// Hypotheses enumerated and, after deduplication, distinct ones.
-    pub hypotheses: [usize; 2],
+    pub hypothesis_counts: [usize; 2],
     /// Hypotheses verified by ICP.
     pub verified: usize,
     /// Whether the winning hypothesis came from a plane triplet (all three translation
@@ -168,7 +157,7 @@ pub struct TargetlessCalibration {
     pub sweep: bool,
     /// Verification score of the best hypothesis: the share of target points within
     /// 0.25 m of a reference point, minus 3 times the free-space
-    /// violations ([`TargetlessCalibration::violations`]).
+    /// violations ([`TargetlessDetails::violations`]).
     pub best_score: f64,
     /// Best verification score of a hypothesis ending at a different pose (0 when none).
     pub second_score: f64,
@@ -183,7 +172,8 @@ pub struct TargetlessCalibration {
     pub ambiguous: bool,
     /// Inlier thresholds used for the reference and the target cloud (metres).
     pub distance_thresholds: [f64; 2],
-    /// Levenberg–Marquardt report of the plane refinement.
+    /// Levenberg–Marquardt report of the plane refinement (step 5; the final ICP then starts from
+    /// its pose).
     pub report: Option<LmReport>,
     /// The final ICP (`None` when disabled).
     pub icp: Option<IcpResult>,
@@ -194,11 +184,6 @@ pub struct TargetlessCalibration {
     pub weakest_rotation: (Vector3<f64>, f64),
     /// Share of the weakest translation direction spanned by the matched planes' normals alone.
     pub plane_translation_share: f64,
-    /// Covariance of the left-perturbation tangent `[rho; phi]` of the result (from ICP when it
-    /// ran, else from the plane refinement).
-    pub covariance: Option<Matrix6<f64>>,
-    /// Stage timings.
-    pub timings: Timings,
 }
 
 /// Calibrates `reference_from_target` from the planes both sensors see (see the module docs).
@@ -288,11 +273,9 @@ pub fn calibrate_targetless(
     ensure_settled(&pose, icp.as_ref(), ambiguity, options)?;
     let check = checks.pair()?.certify(&pose)?;
     let planes = matched_planes(&reference_ds, &target_ds, &refined, &pose);
-    let result = TargetlessCalibration {
-        check,
-        reference_from_target: pose,
-        initial_reference_from_target: winner.pose,
-        hypotheses: [enumerated, candidates.len()],
+    clock.lap("check");
+    let details = TargetlessDetails {
+        hypothesis_counts: [enumerated, candidates.len()],
         verified: chosen.len(),
         triplet: !winner.sweep && winner.free.is_none(),
         sweep: winner.sweep,
@@ -301,26 +284,42 @@ pub fn calibrate_targetless(
         agreement: top.agreement,
         violations: top.violations,
         ambiguous: rivalry.ambiguous,
-        covariance: covariance(icp.as_ref(), refined.report.as_ref()),
         icp,
         weakest_translation: observed.weakest_translation,
         weakest_rotation: observed.weakest_rotation,
         plane_translation_share: observed.plane_translation_share,
         planes_reference: planes.planes_reference,
         planes_target: planes.planes_target,
-        inliers_reference: planes.inliers_reference,
-        inliers_target: planes.inliers_target,
-        rmse: planes.rmse,
         distance_thresholds: [reference_ds.threshold, target_ds.threshold],
         features: [reference_ds.features, target_ds.features],
         report: refined.report,
-        timings: Timings::default(),
     };
-    clock.lap("check");
     Ok(TargetlessCalibration {
+        reference_from_target: pose,
+        initial_reference_from_target: winner.pose,
+        check,
+        rmse: planes.rmse,
+        inliers_reference: planes.inliers_reference,
+        inliers_target: planes.inliers_target,
+        covariance: covariance(details.icp.as_ref(), details.report.as_ref()),
+        refinement: refinement(&details, &pose, &refined.pose),
         timings: clock.finish(),
-        ..result
+        details,
     })
+}
+
+/// The solver of the returned `pose`: the final ICP, unless it kept a pose without moving it
+/// (iterations 0: the plane refinement's `plane_pose`, or the verified hypothesis).
+fn refinement(
+    details: &TargetlessDetails,
+    pose: &Isometry3<f64>,
+    plane_pose: &Isometry3<f64>,
+) -> Refinement {
+    match &details.icp {
+        Some(icp) if icp.iterations > 0 => Refinement::from_icp(icp),
+        Some(_) if pose != plane_pose => Refinement::without_iterations(Solver::Verification),
+        _ => Refinement::from_lm(details.report.as_ref()),
+    }
 }
 
 /// The plane hypotheses (step 3: the number enumerated, the distinct ones best supported first)

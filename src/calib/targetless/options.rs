@@ -53,7 +53,7 @@ pub struct TargetlessOptions {
     /// about its normal in steps of 15 degrees, each polished by ICP: this finds the pose
     /// when the clouds share no pair of non-parallel planes.
     pub ground_sweep: bool,
-    /// Refuse (rather than flag [`TargetlessCalibration::ambiguous`](super::TargetlessCalibration::ambiguous)) when a distinct pose
+    /// Refuse (rather than flag [`TargetlessDetails::ambiguous`](super::TargetlessDetails::ambiguous)) when a distinct pose
     /// verifies almost as well as the best (at least 75 % of its score).
     pub refuse_ambiguous: bool,
     /// Seed of the RANSAC sampler.
