@@ -331,6 +331,18 @@ impl PlanarDetails {
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         lm_report(py, &self.inner.report)
     }
+    fn __repr__(&self) -> String {
+        let o = &self.inner.ordering;
+        format!(
+            "PlanarDetails(matched_planes=3, ordering_chosen={}, ordering_margin_rad={:.4}, \
+             used_up={}, distance_thresholds_m=[{:.4}, {:.4}])",
+            o.chosen,
+            o.margin,
+            if o.used_up { "True" } else { "False" },
+            self.inner.distance_thresholds[0],
+            self.inner.distance_thresholds[1]
+        )
+    }
 }
 
 /// The pole method's own diagnostics (``CalibrationResult.details``).
@@ -449,6 +461,19 @@ impl PoleDetails {
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         lm_report(py, &self.inner.report)
+    }
+    fn __repr__(&self) -> String {
+        let d = &self.inner;
+        format!(
+            "PoleDetails(matched_poles={}, radii_m={:.3?}, hypotheses={}, chosen={}, \
+             margin={:.3}, ambiguous={})",
+            d.poles_reference.len(),
+            d.radii,
+            d.hypotheses.len(),
+            d.chosen,
+            d.margin,
+            if d.ambiguous { "True" } else { "False" }
+        )
     }
 }
 
@@ -574,6 +599,23 @@ impl TargetlessDetails {
     #[getter]
     fn plane_translation_share(&self) -> f64 {
         self.inner.plane_translation_share
+    }
+    fn __repr__(&self) -> String {
+        let d = &self.inner;
+        format!(
+            "TargetlessDetails(matched_planes={}, hypothesis_counts=({}, {}), verified={}, \
+             best_score={:.3}, second_score={:.3}, agreement={:.3}, ambiguous={}, \
+             weakest_translation_share={:.4})",
+            d.planes_reference.len(),
+            d.hypothesis_counts[0],
+            d.hypothesis_counts[1],
+            d.verified,
+            d.best_score,
+            d.second_score,
+            d.agreement,
+            if d.ambiguous { "True" } else { "False" },
+            d.weakest_translation.1
+        )
     }
 }
 
