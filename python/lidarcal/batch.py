@@ -372,7 +372,8 @@ def _csv_value(name: str, value: Any) -> str:
         return " ".join(repr(float(v)) for v in value)
     if isinstance(value, float):
         return repr(value)
-    return str(value)
+    # One physical line per row, so a line a crash cut short is recognisable (and dropped).
+    return " ".join(str(value).splitlines())
 
 
 def _from_csv(row: dict[str, str]) -> dict[str, Any]:
@@ -620,7 +621,7 @@ def _local_client(workers: int | None) -> tuple[Any, Any]:
         n_workers=n,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # a free port: no clash with another cluster's 8787
         env={"RAYON_NUM_THREADS": "1"},
     )
     return Client(cluster), cluster
@@ -668,7 +669,7 @@ def run(
                 owned.append(client)
             else:
                 client, cluster = _local_client(workers)
-                owned += [client, cluster]
+                owned += [cluster, client]  # closed in reverse: the client first
         if max_in_flight is None:
             threads = sum(client.nthreads().values()) or 1
             max_in_flight = max(2, 2 * threads)
