@@ -115,6 +115,20 @@ _METHODS = ("auto", "planes", "targetless", "poles")
 # The manifest
 
 
+def _arrow() -> Any:
+    """pyarrow (the fleet extra; it has no type annotations), imported on first use."""
+    import pyarrow  # type: ignore[import-untyped]
+
+    return pyarrow
+
+
+def _parquet() -> Any:
+    """pyarrow.parquet, imported on first use."""
+    import pyarrow.parquet  # type: ignore[import-untyped]
+
+    return pyarrow.parquet
+
+
 def _cell(value: Any) -> str | None:
     """A manifest cell as text, ``None`` when empty (an empty CSV cell, a Parquet null, NaN)."""
     if value is None:
@@ -135,7 +149,7 @@ def _is_parquet(path: Path) -> bool:
 def _manifest_rows(path: Path, columns: list[str] | None = None) -> Iterator[dict[str, Any]]:
     """The manifest's rows, streamed (a batch of a Parquet file, a line of a CSV at a time)."""
     if _is_parquet(path):
-        import pyarrow.parquet as pq
+        pq = _parquet()
 
         parquet = pq.ParquetFile(path)
         names = parquet.schema_arrow.names
@@ -149,7 +163,7 @@ def _manifest_rows(path: Path, columns: list[str] | None = None) -> Iterator[dic
 
 def _manifest_header(path: Path) -> list[str]:
     if _is_parquet(path):
-        import pyarrow.parquet as pq
+        pq = _parquet()
 
         return list(pq.ParquetFile(path).schema_arrow.names)
     with open(path, newline="") as f:
@@ -355,7 +369,7 @@ def process_row(job: dict[str, str | None]) -> dict[str, Any]:
 
 
 def _schema() -> Any:
-    import pyarrow as pa
+    pa = _arrow()
 
     def kind(name: str) -> Any:
         if name in _TEXT:
@@ -401,8 +415,8 @@ def read_results(path: str | os.PathLike[str]) -> Any:
     """A results file of :func:`run` (Parquet or CSV) as a ``pyarrow.Table`` with the columns of
     :data:`COLUMNS` (``transform`` a list of 16 floats; ``.to_pandas()`` for a DataFrame). A
     Parquet output's journal (rows of an interrupted run) is included."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    pa = _arrow()
+    pq = _parquet()
 
     path = Path(path)
     if not _is_parquet(path):
@@ -490,7 +504,7 @@ class _ParquetSink:
         #: id -> (status, verdict) of the rows already in the output.
         self.done: dict[str, tuple[str | None, str | None]] = {}
         if path.exists():
-            import pyarrow.parquet as pq
+            pq = _parquet()
 
             names = pq.ParquetFile(path).schema_arrow.names
             if tuple(names) != COLUMNS:
@@ -517,8 +531,8 @@ class _ParquetSink:
     def fold(self) -> None:
         """Rewrites the Parquet file with the journal's rows added (a chunk at a time, so memory
         stays bounded), atomically, then removes the journal."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        pa = _arrow()
+        pq = _parquet()
 
         if not self.journal.exists():
             return
@@ -603,7 +617,8 @@ class Summary:
 def _require_fleet() -> None:
     try:
         import distributed  # noqa: F401
-        import pyarrow  # noqa: F401
+
+        _arrow()
         import tqdm  # noqa: F401
     except ImportError as e:
         raise ImportError(

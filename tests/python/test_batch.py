@@ -354,3 +354,20 @@ def test_real_road_pairs(client: Client, tmp_path: Path) -> None:
         assert angle < 0.5 and np.linalg.norm(truth[:3, 3] - est[:3, 3]) < 0.05, (name, row)
         assert rows[f"{name}-good"]["verdict"] == "consistent", rows[f"{name}-good"]
         assert rows[f"{name}-turned"]["verdict"] == "inconsistent", rows[f"{name}-turned"]
+
+
+def test_a_csv_line_cut_by_a_crash_is_dropped_on_resume(tmp_path: Path) -> None:
+    output = tmp_path / "r.csv"
+    sink = batch._CsvSink(output)
+    for job_id in ("a", "b"):
+        row = batch._empty_row(job_id, "monitor")
+        row.update(status="error", kind="bad_row", message="two\nlines")
+        sink.write(row)
+    sink.close()
+    with output.open("a") as f:
+        f.write("c,monitor,ok,,,,1.0 0.0")  # the crash came mid-line
+    again = batch._CsvSink(output)
+    again.close()
+    assert sorted(again.done) == ["a", "b"]
+    assert output.read_text().endswith("\n") and output.read_text().count("\n") == 3
+    assert [r["message"] for r in _rows(output)] == ["two lines", "two lines"]
