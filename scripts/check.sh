@@ -17,7 +17,7 @@ VENV=$(cd "$VENV" && pwd)
 PY="$VENV/bin/python"
 if [ "${SKIP_SETUP:-0}" != 1 ]; then
     "$PY" -m pip install --quiet --upgrade pip
-    "$PY" -m pip install --quiet "maturin>=1.7,<2" "numpy>=1.22" "scipy>=1.9" "pytest>=7" "ruff>=0.6" "mypy>=1.10" "click>=8" "matplotlib>=3.6" "rosbags>=0.10" "pyyaml>=6" "types-PyYAML" "hypothesis>=6" "mkdocs-material>=9.5" "mkdocstrings[python]>=0.26"
+    "$PY" -m pip install --quiet "maturin>=1.7,<2" "numpy>=1.22" "scipy>=1.9" "pytest>=7" "ruff>=0.6" "mypy>=1.10" "click>=8" "matplotlib>=3.6" "rosbags>=0.10" "pyyaml>=6" "types-PyYAML" "hypothesis>=6" "dask[distributed]>=2024.1" "pyarrow>=14" "tqdm>=4.60" "types-tqdm" "mkdocs-material>=9.5" "mkdocstrings[python]>=0.26"
 fi
 
 step "cargo fmt --check"

@@ -10,6 +10,9 @@ clouds (exit 0 consistent, 2 inconsistent, 3 unverifiable).
 ``lidarcal demo`` simulates a building corner seen by two LiDARs, calibrates it with no initial
 guess and prints the ground truth, the estimate and the errors (``--json`` for scripts).
 
+``lidarcal batch MANIFEST --output RESULTS`` calibrates or monitors every row of a manifest on
+Dask (:mod:`lidarcal.batch`, the ``fleet`` extra).
+
 ``lidarcal simulate --scene corner --model vlp16 --seed 0 --output out/`` writes
 ``reference.pcd``, ``target.pcd`` and ``ground_truth.json`` (transforms and true geometry).
 """
@@ -786,6 +789,85 @@ def check_command(
             f"{100 * report.detectable_translation_m:.1f} cm"
         )
     sys.exit(CHECK_EXIT[report.verdict])
+
+
+@main.command("batch")
+@click.argument("manifest", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The results: .parquet or .csv, one row per job. Rows already in it are skipped "
+    "(a rerun resumes).",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Worker processes of the local Dask cluster (default: the core count).",
+)
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    help="Run on an existing Dask cluster (e.g. tcp://head:8786) instead of a local one.",
+)
+@click.option(
+    "--max-in-flight",
+    type=click.IntRange(min=1),
+    help="Rows submitted at a time (default: twice the cluster's threads).",
+)
+@click.option(
+    "--progress/--no-progress",
+    default=None,
+    help="Show a progress bar (default: when stderr is a terminal).",
+)
+def batch_command(
+    manifest: Path,
+    output: Path,
+    workers: int | None,
+    scheduler: str | None,
+    max_in_flight: int | None,
+    progress: bool | None,
+) -> None:
+    """Calibrate or monitor every row of MANIFEST (CSV or Parquet) on Dask.
+
+    Columns: id, reference, target (files or BAG:/topic, read on the workers; relative to the
+    manifest's folder), optional time, method, up, and transform: a stored result, which makes
+    the row a monitoring row (lidarcal check) instead of a calibration. Needs
+    pip install 'lidarcal[fleet]'.
+
+    \b
+    Examples:
+      lidarcal batch fleet.csv --output results.parquet
+      lidarcal batch fleet.parquet --output results.csv --scheduler tcp://head:8786
+
+    Exit status: 1 when some row is an error (a missing or corrupt file, a bad row), else 2 when
+    some monitoring row is inconsistent, else 0. Refusals are outcomes: they are counted in the
+    closing summary and the results file, and leave the status alone.
+    """
+    if workers is not None and scheduler is not None:
+        raise click.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
+    try:
+        from lidarcal import batch
+    except ImportError as e:  # pragma: no cover - the fleet extra is missing
+        raise click.ClickException(f"{e}; pip install 'lidarcal[fleet]'") from e
+    try:
+        summary = batch.run(
+            manifest,
+            output,
+            workers=workers,
+            scheduler=scheduler,
+            max_in_flight=max_in_flight,
+            progress=progress,
+        )
+    except (ValueError, OSError, ImportError) as e:
+        raise click.ClickException(str(e)) from e
+    click.echo(str(summary))
+    for message in summary.errors:
+        click.echo(f"Error {message}", err=True)
+    if summary.error:
+        sys.exit(1)
+    if summary.inconsistent:
+        sys.exit(2)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -67,6 +67,7 @@ def test_docs_pages_have_examples() -> None:
         "docs/building_blocks.md": 2,
         "docs/simulator.md": 1,
         "docs/results.md": 1,
+        "docs/fleet.md": 1,
     }
     assert {page: min(_count(page), n) for page, n in expected.items()} == expected
     assert len(EXAMPLES) >= 12
