@@ -427,19 +427,34 @@ def calibrate_targetless(
     target: _ArrayLike,
     *,
     distance_threshold: float | None = None,
-    voxel_size: float = 0.1,
-    max_planes: int = 10,
-    max_translation: float = 5.0,
-    challenger_range: float = 2.0,
-    icp: bool = True,
-    min_information_share: float = 0.01,
-    ground_sweep: bool = True,
-    refuse_ambiguous: bool = True,
+    voxel_size: float | None = None,
+    max_planes: int | None = None,
+    max_translation: float | None = None,
+    challenger_range: float | None = None,
+    icp: bool | None = None,
+    min_information_share: float | None = None,
+    ground_sweep: bool | None = None,
+    refuse_ambiguous: bool | None = None,
     seed: int = 0,
-) -> CalibrationResult: ...
+) -> CalibrationResult:
+    """Calibrates ``reference_from_target`` from the planes of an ordinary scene, no initial guess.
+
+    Defaults (Rust ``TargetlessOptions::default()``): ``voxel_size=0.1``, ``max_planes=10``,
+    ``max_translation=5``, ``challenger_range=2``, ``icp=True``, ``min_information_share=0.01``,
+    ``ground_sweep=True``, ``refuse_ambiguous=True``.
+    """
+
 def overlap(
-    reference: _ArrayLike, target: _ArrayLike, transform: _ArrayLike, distance: float = 0.25
-) -> float: ...
+    reference: _ArrayLike,
+    target: _ArrayLike,
+    transform: _ArrayLike,
+    distance: float | None = None,
+) -> float:
+    """Fraction of target points within ``distance`` of a reference point under ``transform``.
+
+    Default (Rust ``MethodOptions::default().agreement_distance``, :data:`AGREEMENT_DISTANCE`):
+    ``distance=0.25``.
+    """
 
 AGREEMENT_DISTANCE: float
 AUTO_TIE: float
@@ -456,7 +471,11 @@ def calibrate_auto(
     intensity_threshold: float | None = None,
     vendor: str | None = None,
     max_bright_fraction: float | None = None,
-) -> CalibrationResult: ...
+) -> CalibrationResult:
+    """``calibrate(method="auto")`` in Rust: every applicable method, the best certified result.
+
+    Default (Rust ``PoleOptions::default()``): ``max_bright_fraction=0.25``.
+    """
 
 _PoseGraphTermination = Literal[
     "step_tolerance", "no_further_decrease", "nothing_to_refine", "max_iterations"
@@ -487,21 +506,32 @@ def calibrate_rig(
     reference: _ArrayLike,
     targets: list[tuple[str, _ArrayLike]],
     *,
-    method: str = "auto",
-    pairwise: bool = True,
-    require_all: bool = True,
+    method: str | None = None,
+    pairwise: bool | None = None,
+    require_all: bool | None = None,
     seed: int = 0,
     up: _ArrayLike | None = None,
     distance_threshold: float | None = None,
     intensity_threshold: float | None = None,
     vendor: str | None = None,
     max_bright_fraction: float | None = None,
-) -> _RigDict: ...
+) -> _RigDict:
+    """The rig calibration (``lidarcal.calibrate_rig`` wraps it).
+
+    Defaults (Rust ``RigOptions::default()`` and ``PoleOptions::default()``): ``method='auto'``,
+    ``pairwise=True``, ``require_all=True``, ``max_bright_fraction=0.25``.
+    """
+
 def refine_pose_graph(
     poses: list[_F64Array],
     edges: list[tuple[int, int, _F64Array, _F64Array]],
-    iterations: int = 20,
-) -> list[_F64Array]: ...
+    iterations: int | None = None,
+) -> list[_F64Array]:
+    """Refines a pose graph whose node 0 is fixed (``lidarcal.refine_pose_graph`` wraps it).
+
+    Default (Rust ``PoseGraphOptions::default()``): ``iterations=20``.
+    """
+
 def calibrate_planes(
     reference: _ArrayLike,
     target: _ArrayLike,
@@ -509,13 +539,19 @@ def calibrate_planes(
     distance_threshold: float | None = None,
     seed: int = 0,
     up: _ArrayLike | None = None,
-    refine: bool = True,
-    loss: Literal["auto", "squared", "linear", "huber", "cauchy"] = "auto",
+    refine: bool | None = None,
+    loss: Literal["auto", "squared", "linear", "huber", "cauchy"] | None = None,
     loss_scale: float | None = None,
-    min_inliers: int = 50,
-    max_iterations: int = 100,
+    min_inliers: int | None = None,
+    max_iterations: int | None = None,
     time_budget_s: float | None = None,
-) -> CalibrationResult: ...
+) -> CalibrationResult:
+    """Calibrates ``reference_from_target`` from a wall corner (three planes) seen by both sensors.
+
+    Defaults (Rust ``PlanarOptions::default()``): ``refine=True``, ``loss='auto'``,
+    ``min_inliers=50``, ``max_iterations=100``.
+    """
+
 def calibrate_poles(
     reference: _ArrayLike,
     target: _ArrayLike,
@@ -524,13 +560,20 @@ def calibrate_poles(
     vendor: Literal["velodyne", "hesai", "leishen", "robosense"] | None = None,
     pole_radius: float | None = None,
     seed: int = 0,
-    axis_fit: Literal["cylinder", "line"] = "cylinder",
-    cluster_tolerance: float = 0.5,
-    min_points: int = 15,
-    max_iterations: int = 100,
+    axis_fit: Literal["cylinder", "line"] | None = None,
+    cluster_tolerance: float | None = None,
+    min_points: int | None = None,
+    max_iterations: int | None = None,
     time_budget_s: float | None = None,
-    max_bright_fraction: float = 0.25,
-) -> CalibrationResult: ...
+    max_bright_fraction: float | None = None,
+) -> CalibrationResult:
+    """Calibrates ``reference_from_target`` from two (or more) non-parallel taped poles.
+
+    Defaults (Rust ``PoleOptions::default()``): ``axis_fit='cylinder'``,
+    ``cluster_tolerance=0.5``, ``min_points=15``, ``max_iterations=100``,
+    ``max_bright_fraction=0.25``.
+    """
+
 def rqe(points: _ArrayLike, sigma: float) -> float: ...
 
 @final

@@ -44,6 +44,9 @@ AUTO_TIE: float = _lidarcal.AUTO_TIE
 #: Default share of a cloud above the intensity threshold beyond which the poles are refused.
 MAX_BRIGHT_FRACTION: float = _lidarcal.MAX_BRIGHT_FRACTION
 
+# ``method`` of :func:`calibrate` left None: the Rust ``Method::default()`` (``calibrate_rig``'s).
+_DEFAULT_METHOD: Method = _lidarcal._defaults()["calibrate_rig"]["method"]
+
 #: A target pair is calibrated directly in :func:`calibrate_rig` only when the result brings at
 #: least this fraction of its points onto the other cloud.
 MIN_PAIR_OVERLAP: float = _lidarcal.MIN_PAIR_OVERLAP
@@ -59,7 +62,7 @@ def _cloud(points: npt.ArrayLike, name: str) -> F64Array:
 def calibrate(
     reference: npt.ArrayLike,
     target: npt.ArrayLike,
-    method: Method = "auto",
+    method: Method | None = None,
     *,
     seed: int = 0,
     up: npt.ArrayLike | None = None,
@@ -73,6 +76,8 @@ def calibrate(
     The options go to the methods that take them: ``up`` to the corner method,
     ``distance_threshold`` to the corner and targetless methods, ``intensity_threshold``,
     ``vendor`` and ``max_bright_fraction`` to the poles (None: that method's default).
+    Left None, ``method`` is the Rust ``Method::default()`` and ``max_bright_fraction`` that of
+    ``PoleOptions::default()``: ``method='auto'``, ``max_bright_fraction=0.25``.
 
     ``"planes"`` is :func:`lidarcal.calibrate_planes` (a wall corner), ``"targetless"``
     :func:`lidarcal.calibrate_targetless` (the planes of any scene, e.g. a street), ``"poles"``
@@ -88,6 +93,8 @@ def calibrate(
     """
     ref = _cloud(reference, "reference")
     tgt = _cloud(target, "target")
+    if method is None:
+        method = _DEFAULT_METHOD
     if method == "planes":
         return calibrate_planes(ref, tgt, seed=seed, up=up, distance_threshold=distance_threshold)
     if method == "targetless":
@@ -99,9 +106,7 @@ def calibrate(
             seed=seed,
             intensity_threshold=intensity_threshold,
             vendor=vendor,
-            max_bright_fraction=(
-                MAX_BRIGHT_FRACTION if max_bright_fraction is None else max_bright_fraction
-            ),
+            max_bright_fraction=max_bright_fraction,
         )
     if method != "auto":
         raise ValueError(
@@ -174,7 +179,7 @@ class RigCalibration:
 def refine_pose_graph(
     poses: npt.ArrayLike,
     edges: Sequence[tuple[int, int, npt.ArrayLike, npt.ArrayLike]],
-    iterations: int = 20,
+    iterations: int | None = None,
 ) -> F64Array:
     """Refines a pose graph whose node 0 (the reference) is fixed.
 
@@ -184,11 +189,16 @@ def refine_pose_graph(
     Minimises the sum of ``e^T W e`` with ``e = log(a_from_b^-1 a^-1 b)`` by Gauss-Newton and
     returns the refined ``(K, 4, 4)`` stack, node 0 unchanged. Raises ``ValueError`` for an edge
     naming a missing node, a node in no edge, or a malformed matrix.
+
+    Left None, ``iterations`` (Gauss-Newton iterations at most) takes the Rust
+    ``PoseGraphOptions::default()``: ``iterations=20``.
     """
     stack = np.asarray(poses, dtype=np.float64)
     if stack.ndim != 3 or stack.shape[1:] != (4, 4):
         raise ValueError(f"poses must have shape (K, 4, 4), got {stack.shape}")
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
+    if iterations is not None and (
+        isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0
+    ):
         raise ValueError(f"iterations must be a non-negative integer, got {iterations!r}")
     refined = _lidarcal.refine_pose_graph(
         list(stack),
@@ -205,9 +215,9 @@ def calibrate_rig(
     reference: npt.ArrayLike,
     targets: Mapping[str, npt.ArrayLike] | Sequence[npt.ArrayLike],
     *,
-    method: Method = "auto",
-    pairwise: bool = True,
-    require_all: bool = True,
+    method: Method | None = None,
+    pairwise: bool | None = None,
+    require_all: bool | None = None,
     seed: int = 0,
     up: npt.ArrayLike | None = None,
     distance_threshold: float | None = None,
@@ -228,6 +238,10 @@ def calibrate_rig(
     ``require_all=False``: then the others are returned and that target is listed in
     ``unconnected`` (with its reasons in ``failures``). The method options go to every edge's
     calibration as in :func:`calibrate`.
+
+    Left None, ``method``, ``pairwise`` and ``require_all`` take the Rust ``RigOptions::default()``
+    and ``max_bright_fraction`` that of ``PoleOptions::default()``: ``method='auto'``,
+    ``pairwise=True``, ``require_all=True``, ``max_bright_fraction=0.25``.
     """
     ref = _cloud(reference, "reference")
     if isinstance(targets, Mapping):
@@ -236,7 +250,7 @@ def calibrate_rig(
         clouds = {f"target{i}": _cloud(v, f"target{i}") for i, v in enumerate(targets)}
     if not clouds:
         raise ValueError("targets is empty")
-    if method not in ("auto", "planes", "targetless", "poles"):
+    if method not in (None, "auto", "planes", "targetless", "poles"):
         raise ValueError(
             f"method must be 'auto', 'planes', 'targetless' or 'poles', got {method!r}"
         )

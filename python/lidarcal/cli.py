@@ -49,10 +49,13 @@ from lidarcal.export import (
     write_result,
 )
 
-# Defaults from Rust (`--help` shows them): the beam model (`Preset::default()`) and the corner
-# scene's options (`CornerOptions::default()`).
+# Defaults from Rust (`--help` shows them): the beam model (`Preset::default()`), the corner
+# scene's options (`CornerOptions::default()`), the calibration method (`Method::default()`, as
+# `RigOptions::default()` has it) and the poles' bright share (`PoleOptions::default()`).
 _MODEL = _defaults()["sim_scan"]["model"]
 _CORNER = _defaults()["sim_corner_scene"]
+_METHOD = _defaults()["calibrate_rig"]["method"]
+_MAX_BRIGHT_FRACTION = _defaults()["calibrate_poles"]["max_bright_fraction"]
 
 
 @click.group()
@@ -497,7 +500,7 @@ def _rig_entries(
 @click.option(
     "--method",
     type=click.Choice(["auto", "planes", "targetless", "poles"]),
-    default="auto",
+    default=_METHOD,
     show_default=True,
     help="auto: try every method that applies and keep the certified result that fits best "
     "(refused when two disagree). planes: a wall corner (three planes) seen by both sensors. "
@@ -532,8 +535,8 @@ def _rig_entries(
     "--max-bright-fraction",
     type=click.FloatRange(0.0, 1.0, min_open=True),
     help="poles: refuse when more than this share of a cloud is at or above the intensity "
-    "threshold (default 0.25; tape is a small part of a scene). Use 1 for clouds cropped to "
-    "the poles.",
+    f"threshold (default {_MAX_BRIGHT_FRACTION:g}; tape is a small part of a scene). Use 1 for "
+    "clouds cropped to the poles.",
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="RANSAC seed.")
 @click.option("--topic", help="For bags: the PointCloud2 topic (needed if there are several).")

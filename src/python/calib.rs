@@ -8,6 +8,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::arrays;
+use super::defaults::table;
+use super::kernels::loss_name;
 use super::result::{matrix4, CalibrationResult};
 use super::run;
 use crate::calib::method::{self, Cloud, Method, MethodOptions};
@@ -65,9 +67,11 @@ fn up_arg(up: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(Vector3<f64>, Vecto
 ///     "cauchy" with loss_scale in metres.
 /// time_budget_s: wall-clock limit in seconds; past it CalibrationError ("time budget ...
 ///     exhausted during <stage>") instead of running on. None: no limit.
+/// Left None, refine, loss, min_inliers and max_iterations take the Rust
+///     `PlanarOptions::default()`: refine=True, loss='auto', min_inliers=50, max_iterations=100.
 /// Raises CalibrationError with the reason when no trustworthy result exists.
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, seed=0, up=None, refine=true, loss="auto", loss_scale=None, min_inliers=50, max_iterations=100, time_budget_s=None))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, seed=0, up=None, refine=None, loss=None, loss_scale=None, min_inliers=None, max_iterations=None, time_budget_s=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_planes(
     py: Python<'_>,
@@ -76,11 +80,11 @@ fn calibrate_planes(
     distance_threshold: Option<f64>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
     up: Option<&Bound<'_, PyAny>>,
-    refine: bool,
-    loss: &str,
+    refine: Option<bool>,
+    loss: Option<&str>,
     loss_scale: Option<f64>,
-    min_inliers: usize,
-    max_iterations: usize,
+    min_inliers: Option<usize>,
+    max_iterations: Option<usize>,
     time_budget_s: Option<f64>,
 ) -> PyResult<CalibrationResult> {
     let time_budget = crate::budget::budget_from_secs(time_budget_s)?;
@@ -91,16 +95,18 @@ fn calibrate_planes(
             PyValueError::new_err(format!("loss={name:?} needs loss_scale (metres)"))
         })
     };
+    let defaults = PlanarOptions::default();
     let loss = match loss {
-        "auto" => None,
-        "squared" | "linear" => Some(Loss::Squared),
-        "huber" => Some(Loss::Huber {
+        None => defaults.loss,
+        Some("auto") => None,
+        Some("squared" | "linear") => Some(Loss::Squared),
+        Some("huber") => Some(Loss::Huber {
             delta: needs_scale("huber")?,
         }),
-        "cauchy" => Some(Loss::Cauchy {
+        Some("cauchy") => Some(Loss::Cauchy {
             scale: needs_scale("cauchy")?,
         }),
-        other => {
+        Some(other) => {
             return Err(PyValueError::new_err(format!(
                 "loss must be 'auto', 'squared', 'huber' or 'cauchy', got {other:?}"
             )))
@@ -110,16 +116,15 @@ fn calibrate_planes(
         distance_threshold,
         seed,
         up: up_arg(up)?,
-        refine,
+        refine: refine.unwrap_or(defaults.refine),
         loss,
-        min_inliers,
-        min_plane_width: crate::calib::planes::MIN_PLANE_WIDTH,
+        min_inliers: min_inliers.unwrap_or(defaults.min_inliers),
         lm: LmOptions {
-            max_iterations,
-            ..PlanarOptions::default().lm
+            max_iterations: max_iterations.unwrap_or(defaults.lm.max_iterations),
+            ..defaults.lm
         },
         time_budget,
-        check: crate::check::CheckOptions::fitted(),
+        ..defaults
     };
     let inner = run(py, move || {
         rs_calibrate_planes(&reference, &target, &options)
@@ -133,16 +138,19 @@ fn calibrate_planes(
 /// intensity_threshold: returns at or above it are tape; wins over vendor.
 /// vendor: "velodyne" (230), "hesai", "leishen" or "robosense" (200); with neither, the threshold
 ///     is the middle of the highest wide intensity gap above the median (tape is the brightest).
-/// pole_radius: metres, or None to estimate it per pole. axis_fit: "cylinder" (default) or "line"
-///     (the centroid line of Xue et al., biased by up to a radius; for comparison).
+/// pole_radius: metres, or None to estimate it per pole. axis_fit: "cylinder" or "line" (the
+///     centroid line of Xue et al., biased by up to a radius; for comparison).
 /// Raises ValueError for malformed input and CalibrationError with the reason (no bright points,
 /// fewer than two poles, parallel poles, indistinguishable hypotheses). time_budget_s: as for
 /// calibrate_planes (a huge cluster_tolerance on a dense cloud makes the clustering quadratic).
 /// max_bright_fraction: refuse when more of a cloud's returns than this share are at or above the
 ///     threshold (tape is a small part of a scene; a threshold of 0 makes everything "tape");
 ///     raise it to 1.0 for a cloud cropped to the poles.
+/// Left None, axis_fit, cluster_tolerance, min_points, max_iterations and max_bright_fraction take
+///     the Rust `PoleOptions::default()`: axis_fit='cylinder', cluster_tolerance=0.5,
+///     min_points=15, max_iterations=100, max_bright_fraction=0.25.
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit="cylinder", cluster_tolerance=0.5, min_points=15, max_iterations=100, time_budget_s=None, max_bright_fraction=0.25))]
+#[pyo3(signature = (reference, target, *, intensity_threshold=None, vendor=None, pole_radius=None, seed=0, axis_fit=None, cluster_tolerance=None, min_points=None, max_iterations=None, time_budget_s=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_poles(
     py: Python<'_>,
@@ -152,41 +160,42 @@ fn calibrate_poles(
     vendor: Option<&str>,
     pole_radius: Option<f64>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
-    axis_fit: &str,
-    cluster_tolerance: f64,
-    min_points: usize,
-    max_iterations: usize,
+    axis_fit: Option<&str>,
+    cluster_tolerance: Option<f64>,
+    min_points: Option<usize>,
+    max_iterations: Option<usize>,
     time_budget_s: Option<f64>,
-    max_bright_fraction: f64,
+    max_bright_fraction: Option<f64>,
 ) -> PyResult<CalibrationResult> {
     let time_budget = crate::budget::budget_from_secs(time_budget_s)?;
     let (reference, ref_intensity) = arrays::points_with_intensity(reference, "reference")?;
     let (target, tgt_intensity) = arrays::points_with_intensity(target, "target")?;
     let vendor = vendor.map(Vendor::from_name).transpose()?;
+    let defaults = PoleOptions::default();
     let axis_fit = match axis_fit {
-        "cylinder" => AxisFit::Cylinder,
-        "line" => AxisFit::Line,
-        other => {
+        None => defaults.axis_fit,
+        Some("cylinder") => AxisFit::Cylinder,
+        Some("line") => AxisFit::Line,
+        Some(other) => {
             return Err(PyValueError::new_err(format!(
                 "axis_fit must be 'cylinder' or 'line', got {other:?}"
             )))
         }
     };
-    let defaults = PoleOptions::default();
     let options = PoleOptions {
         intensity_threshold,
         vendor,
         pole_radius,
         seed,
         axis_fit,
-        cluster_tolerance,
-        min_points,
+        cluster_tolerance: cluster_tolerance.unwrap_or(defaults.cluster_tolerance),
+        min_points: min_points.unwrap_or(defaults.min_points),
         lm: LmOptions {
-            max_iterations,
+            max_iterations: max_iterations.unwrap_or(defaults.lm.max_iterations),
             ..defaults.lm
         },
         time_budget,
-        max_bright_fraction,
+        max_bright_fraction: max_bright_fraction.unwrap_or(defaults.max_bright_fraction),
         ..defaults
     };
     let inner = run(py, move || {
@@ -217,40 +226,45 @@ fn calibrate_poles(
 ///     largest plane of each cloud turned about its normal (no common plane pair needed).
 ///     refuse_ambiguous: raise when a distinct pose verifies almost as well as the best (else
 ///     return it with ambiguous=True).
+/// Left None, the keywords but distance_threshold and seed take the Rust
+///     `TargetlessOptions::default()`: voxel_size=0.1, max_planes=10, max_translation=5,
+///     challenger_range=2, icp=True, min_information_share=0.01, ground_sweep=True,
+///     refuse_ambiguous=True.
 /// Raises CalibrationError naming why (too few planes, nothing verifies, an unconstrained
 /// direction such as the axis of a corridor).
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=0.1, max_planes=10, max_translation=5.0, challenger_range=2.0, icp=true, min_information_share=0.01, ground_sweep=true, refuse_ambiguous=true, seed=0))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=None, max_planes=None, max_translation=None, challenger_range=None, icp=None, min_information_share=None, ground_sweep=None, refuse_ambiguous=None, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_targetless(
     py: Python<'_>,
     reference: &Bound<'_, PyAny>,
     target: &Bound<'_, PyAny>,
     distance_threshold: Option<f64>,
-    voxel_size: f64,
-    max_planes: usize,
-    max_translation: f64,
-    challenger_range: f64,
-    icp: bool,
-    min_information_share: f64,
-    ground_sweep: bool,
-    refuse_ambiguous: bool,
+    voxel_size: Option<f64>,
+    max_planes: Option<usize>,
+    max_translation: Option<f64>,
+    challenger_range: Option<f64>,
+    icp: Option<bool>,
+    min_information_share: Option<f64>,
+    ground_sweep: Option<bool>,
+    refuse_ambiguous: Option<bool>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
 ) -> PyResult<CalibrationResult> {
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;
+    let d = TargetlessOptions::default();
     let options = TargetlessOptions {
-        challenger_range,
-        ground_sweep,
-        refuse_ambiguous,
+        challenger_range: challenger_range.unwrap_or(d.challenger_range),
+        ground_sweep: ground_sweep.unwrap_or(d.ground_sweep),
+        refuse_ambiguous: refuse_ambiguous.unwrap_or(d.refuse_ambiguous),
         distance_threshold,
-        voxel_size,
-        max_planes,
-        max_translation,
-        icp,
-        min_information_share,
+        voxel_size: voxel_size.unwrap_or(d.voxel_size),
+        max_planes: max_planes.unwrap_or(d.max_planes),
+        max_translation: max_translation.unwrap_or(d.max_translation),
+        icp: icp.unwrap_or(d.icp),
+        min_information_share: min_information_share.unwrap_or(d.min_information_share),
         seed,
-        ..TargetlessOptions::default()
+        ..d
     };
     let inner = run(py, move || {
         rs_calibrate_targetless(&reference, &target, &options)
@@ -260,7 +274,8 @@ fn calibrate_targetless(
 
 /// The options `calibrate(method="auto")` and `calibrate_rig` pass on: `seed` to every method,
 /// `up` to the corner method, `distance_threshold` to the corner and targetless methods,
-/// `intensity_threshold`, `vendor` and `max_bright_fraction` to the poles.
+/// `intensity_threshold`, `vendor` and `max_bright_fraction` to the poles; None keeps the
+/// method's `Default`.
 fn method_options(
     seed: u64,
     up: Option<&Bound<'_, PyAny>>,
@@ -306,6 +321,8 @@ fn borrow_cloud(c: &OwnedCloud) -> crate::Result<Cloud<'_>> {
 /// (within 0.01 of the best, the earlier method wins). Raises CalibrationError (with kind) listing
 /// each method's reason when none succeeds, or of kind "inconsistent_methods" when two certified
 /// results disagree.
+/// Left None, max_bright_fraction takes the Rust `PoleOptions::default()`:
+///     max_bright_fraction=0.25.
 #[pyfunction]
 #[pyo3(signature = (reference, target, *, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
@@ -347,16 +364,19 @@ fn calibrate_auto(
 /// rotation_residual_deg, translation_residual_m, CalibrationResult)), "failures"
 /// ({(a, b): reason}), "unconnected" (names) and "pose_graph" (the refinement's report: a dict of
 /// converged, termination, iterations, initial_cost, final_cost).
+/// Left None, method, pairwise and require_all take the Rust `RigOptions::default()` and
+///     max_bright_fraction `PoleOptions::default()`: method='auto', pairwise=True,
+///     require_all=True, max_bright_fraction=0.25.
 #[pyfunction]
-#[pyo3(signature = (reference, targets, *, method="auto", pairwise=true, require_all=true, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
+#[pyo3(signature = (reference, targets, *, method=None, pairwise=None, require_all=None, seed=0, up=None, distance_threshold=None, intensity_threshold=None, vendor=None, max_bright_fraction=None))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_rig<'py>(
     py: Python<'py>,
     reference: &Bound<'py, PyAny>,
     targets: Vec<(String, Bound<'py, PyAny>)>,
-    method: &str,
-    pairwise: bool,
-    require_all: bool,
+    method: Option<&str>,
+    pairwise: Option<bool>,
+    require_all: Option<bool>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
     up: Option<&Bound<'py, PyAny>>,
     distance_threshold: Option<f64>,
@@ -364,7 +384,11 @@ fn calibrate_rig<'py>(
     vendor: Option<&str>,
     max_bright_fraction: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let method = Method::from_name(method)?;
+    let defaults = RigOptions::default();
+    let method = match method {
+        Some(name) => Method::from_name(name)?,
+        None => defaults.method,
+    };
     let methods = method_options(
         seed,
         up,
@@ -381,9 +405,9 @@ fn calibrate_rig<'py>(
     let options = RigOptions {
         method,
         methods,
-        pairwise,
-        require_all,
-        ..RigOptions::default()
+        pairwise: pairwise.unwrap_or(defaults.pairwise),
+        require_all: require_all.unwrap_or(defaults.require_all),
+        ..defaults
     };
     let out = run(py, move || {
         let borrowed = clouds
@@ -439,13 +463,15 @@ fn calibrate_rig<'py>(
 }
 
 /// Refines a pose graph whose node 0 is fixed (see lidarcal.refine_pose_graph).
+/// Left None, iterations takes the Rust `PoseGraphOptions::default()` max_iterations:
+///     iterations=20.
 #[pyfunction]
-#[pyo3(signature = (poses, edges, iterations=20))]
+#[pyo3(signature = (poses, edges, iterations=None))]
 fn refine_pose_graph<'py>(
     py: Python<'py>,
     poses: Vec<Bound<'py, PyAny>>,
     edges: Vec<(usize, usize, Bound<'py, PyAny>, Bound<'py, PyAny>)>,
-    iterations: usize,
+    iterations: Option<usize>,
 ) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
     let poses = poses
         .iter()
@@ -474,9 +500,10 @@ fn refine_pose_graph<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
+    let d = PoseGraphOptions::default();
     let options = PoseGraphOptions {
-        max_iterations: iterations,
-        ..PoseGraphOptions::default()
+        max_iterations: iterations.unwrap_or(d.max_iterations),
+        ..d
     };
     let refined = run(py, move || rs_refine_pose_graph(&poses, &edges, &options))?;
     refined.poses.iter().map(|p| matrix4(py, p)).collect()
@@ -484,15 +511,18 @@ fn refine_pose_graph<'py>(
 
 /// Fraction of target points that land within `distance` of a reference point under
 /// `transform` (reference_from_target).
+/// Left None, distance takes the Rust `MethodOptions::default().agreement_distance` (the rig's
+///     pair overlap test, `AGREEMENT_DISTANCE`): distance=0.25.
 #[pyfunction]
-#[pyo3(signature = (reference, target, transform, distance=0.25))]
+#[pyo3(signature = (reference, target, transform, distance=None))]
 fn overlap(
     py: Python<'_>,
     reference: &Bound<'_, PyAny>,
     target: &Bound<'_, PyAny>,
     transform: &Bound<'_, PyAny>,
-    distance: f64,
+    distance: Option<f64>,
 ) -> PyResult<f64> {
+    let distance = distance.unwrap_or(MethodOptions::default().agreement_distance);
     let reference = arrays::points(reference, "reference")?;
     let target = arrays::points(target, "target")?;
     let pose = crate::geometry::isometry_from_matrix(&arrays::matrix4(transform, "transform")?)?;
@@ -512,6 +542,65 @@ fn overlap(
 fn rqe(py: Python<'_>, points: &Bound<'_, PyAny>, sigma: f64) -> PyResult<f64> {
     let points = arrays::points(points, "points")?;
     run(py, move || crate::metrics::rqe(&points, sigma)).map(|r| r.crispness)
+}
+
+/// The Rust defaults behind the calibration functions' keywords (see `super::defaults`).
+pub(crate) fn defaults(out: &Bound<'_, PyDict>) -> PyResult<()> {
+    let o = PlanarOptions::default();
+    let t = table(out, "calibrate_planes")?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("refine", o.refine)?;
+    t.set_item("loss", o.loss.map_or("auto", loss_name))?;
+    t.set_item("min_inliers", o.min_inliers)?;
+    t.set_item("max_iterations", o.lm.max_iterations)?;
+
+    let o = PoleOptions::default();
+    let t = table(out, "calibrate_poles")?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("axis_fit", axis_fit_name(o.axis_fit))?;
+    t.set_item("cluster_tolerance", o.cluster_tolerance)?;
+    t.set_item("min_points", o.min_points)?;
+    t.set_item("max_iterations", o.lm.max_iterations)?;
+    t.set_item("max_bright_fraction", o.max_bright_fraction)?;
+    let max_bright_fraction = o.max_bright_fraction;
+
+    let o = TargetlessOptions::default();
+    let t = table(out, "calibrate_targetless")?;
+    t.set_item("seed", o.seed)?;
+    t.set_item("voxel_size", o.voxel_size)?;
+    t.set_item("max_planes", o.max_planes)?;
+    t.set_item("max_translation", o.max_translation)?;
+    t.set_item("challenger_range", o.challenger_range)?;
+    t.set_item("icp", o.icp)?;
+    t.set_item("min_information_share", o.min_information_share)?;
+    t.set_item("ground_sweep", o.ground_sweep)?;
+    t.set_item("refuse_ambiguous", o.refuse_ambiguous)?;
+
+    let t = table(out, "calibrate_auto")?;
+    t.set_item("seed", MethodOptions::default().planes.seed)?;
+    t.set_item("max_bright_fraction", max_bright_fraction)?;
+
+    let o = RigOptions::default();
+    let t = table(out, "calibrate_rig")?;
+    t.set_item("seed", o.methods.planes.seed)?;
+    t.set_item("method", o.method.name())?;
+    t.set_item("pairwise", o.pairwise)?;
+    t.set_item("require_all", o.require_all)?;
+    t.set_item("max_bright_fraction", o.methods.poles.max_bright_fraction)?;
+
+    let t = table(out, "refine_pose_graph")?;
+    t.set_item("iterations", PoseGraphOptions::default().max_iterations)?;
+    let t = table(out, "overlap")?;
+    t.set_item("distance", MethodOptions::default().agreement_distance)?;
+    Ok(())
+}
+
+/// The name `calibrate_poles` reads an axis fit by.
+fn axis_fit_name(fit: AxisFit) -> &'static str {
+    match fit {
+        AxisFit::Cylinder => "cylinder",
+        AxisFit::Line => "line",
+    }
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -21,6 +21,7 @@ pub(crate) fn table<'py>(out: &Bound<'py, PyDict>, function: &str) -> PyResult<B
 #[pyo3(name = "_defaults")]
 fn defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     let out = PyDict::new(py);
+    super::calib::defaults(&out)?;
     super::check::defaults(&out)?;
     super::kernels::defaults(&out)?;
     super::ransac::defaults(&out)?;

@@ -260,8 +260,8 @@ impl RefineResult {
     }
 }
 
-/// The name `loss_arg` reads a loss by.
-fn loss_name(loss: Loss) -> &'static str {
+/// The name `loss_arg` (and `calibrate_planes`) reads a loss by.
+pub(super) fn loss_name(loss: Loss) -> &'static str {
     match loss {
         Loss::Squared => "squared",
         Loss::Huber { .. } => "huber",

@@ -2,7 +2,8 @@
 
 ``_lidarcal._defaults()`` reports, per function, the Rust ``Default`` (or constant) each such
 keyword takes. These tests hold everything else to it: the runtime signatures, the stubs and the
-``lidarcal.sim`` forwarders show ``None`` (or, where None means something else, the same value),
+Python forwarders (``lidarcal.sim``, ``lidarcal.calibrate``, ``calibrate_rig`` and
+``refine_pose_graph``) show ``None`` (or, where None means something else, the same value),
 the docstrings state the right value, and leaving a keyword out gives the same result as passing
 the Rust value explicitly.
 """
@@ -20,13 +21,17 @@ from typing import Any
 import numpy as np
 import pytest
 
+import lidarcal
 from lidarcal import _lidarcal, sim
 
 DEFAULTS: dict[str, dict[str, Any]] = _lidarcal._defaults()
 STUB = Path(__file__).resolve().parents[2] / "python" / "lidarcal" / "_lidarcal.pyi"
 
-# The lidarcal.sim functions that forward to a function of the extension module.
+# The Python functions that forward to a function of the extension module.
 WRAPPERS: dict[str, Callable[..., Any]] = {
+    "calibrate_auto": lidarcal.calibrate,
+    "calibrate_rig": lidarcal.calibrate_rig,
+    "refine_pose_graph": lidarcal.refine_pose_graph,
     "Shape.rectangle": sim.rectangle,
     "Shape.cuboid": sim.cuboid,
     "Shape.cylinder": sim.cylinder,
@@ -105,7 +110,7 @@ def _signatures(name: str) -> dict[str, dict[str, Any]]:
         "stub": _stub_defaults(STUBS[name]),
     }
     if name in WRAPPERS:
-        found["lidarcal.sim wrapper"] = _signature_defaults(WRAPPERS[name])
+        found["wrapper"] = _signature_defaults(WRAPPERS[name])
     return found
 
 
@@ -115,13 +120,22 @@ def _docs(name: str) -> dict[str, str]:
         "stub": ast.get_docstring(STUBS[name]) or "",
     }
     if name in WRAPPERS:
-        found["lidarcal.sim wrapper"] = WRAPPERS[name].__doc__ or ""
+        found["wrapper"] = WRAPPERS[name].__doc__ or ""
     return found
 
 
 def test_the_table_covers_the_functions_that_take_rust_defaults() -> None:
     assert set(WRAPPERS) <= set(DEFAULTS)
     assert {"check", "ransac_plane", "extract_planes", "refine_point_to_plane"} <= set(DEFAULTS)
+    assert {
+        "calibrate_planes",
+        "calibrate_poles",
+        "calibrate_targetless",
+        "calibrate_auto",
+        "calibrate_rig",
+        "refine_pose_graph",
+        "overlap",
+    } <= set(DEFAULTS)
     for name, table in DEFAULTS.items():
         assert name in STUBS, f"{name} has no stub"
         assert table, f"{name}: empty table"
@@ -148,7 +162,7 @@ def test_signatures_take_none_or_the_rust_value(name: str) -> None:
 @pytest.mark.parametrize("name", sorted(DEFAULTS))
 def test_docstrings_state_the_rust_defaults(name: str) -> None:
     rust = DEFAULTS[name]
-    user_doc = "lidarcal.sim wrapper" if name in WRAPPERS else "stub"
+    user_doc = "wrapper" if name in WRAPPERS else "stub"
     user_signature = _signatures(name)[user_doc]
     docs = _docs(name)
     for keyword, value in rust.items():
@@ -203,6 +217,38 @@ def _corner() -> Any:
     return _lidarcal.sim_corner_scene(seed=2, clutter_boxes=0)
 
 
+@functools.cache
+def _skewed_corner() -> Any:
+    """A corner the planar method orders without ``up`` (walls not at a right angle)."""
+    return _lidarcal.sim_corner_scene(seed=2, clutter_boxes=0, wall_angle_deg=75.0)
+
+
+@functools.cache
+def _poles() -> Any:
+    return _lidarcal.sim_poles_scene(seed=1)
+
+
+@functools.cache
+def _street() -> Any:
+    return _lidarcal.sim_street_scene(seed=1)
+
+
+def _calibrated(result: Any) -> list[Any]:
+    return [result.transform, result.rmse, result.method]
+
+
+def _pose_graph() -> tuple[np.ndarray, list[tuple[int, int, np.ndarray, np.ndarray]]]:
+    """Three nodes, measured edges a little off the poses, every edge weighted alike."""
+    truth = [np.eye(4), _translation(1.0, 0.0, 0.0), _translation(0.0, 2.0, 0.5)]
+    kicks = [[0.01, 0, 0, 0, 0.002, 0], [0, -0.02, 0.01, 0.003, 0, 0], [0, 0, 0.02, 0, 0, -0.002]]
+    edges = [
+        (a, b, np.linalg.inv(truth[a]) @ truth[b] @ _lidarcal.se3_exp(k), np.eye(6))
+        for (a, b), k in zip([(0, 1), (1, 2), (0, 2)], kicks, strict=True)
+    ]
+    start = np.stack([truth[0], truth[1] @ _translation(0.05, 0, 0), truth[2]])
+    return start, edges
+
+
 # name -> a call taking the keywords under test, and what of its result to compare.
 CALLS: dict[str, Callable[..., Any]] = {
     "BeamModel.custom": lambda **kw: [
@@ -246,6 +292,32 @@ CALLS: dict[str, Callable[..., Any]] = {
     "refine_point_to_plane": lambda **kw: (
         _lidarcal.refine_point_to_plane(*_refine_inputs(), **kw).transform
     ),
+    "calibrate_planes": lambda **kw: _calibrated(
+        _lidarcal.calibrate_planes(_skewed_corner().reference, _skewed_corner().target, **kw)
+    ),
+    "calibrate_poles": lambda **kw: _calibrated(
+        _lidarcal.calibrate_poles(_poles().reference, _poles().target, **kw)
+    ),
+    "calibrate_targetless": lambda **kw: _calibrated(
+        _lidarcal.calibrate_targetless(_street().reference, _street().target, **kw)
+    ),
+    # Through the Python forwarders, which pass None on.
+    "calibrate_auto": lambda **kw: _calibrated(
+        lidarcal.calibrate(_poles().reference, _poles().target, **kw)
+    ),
+    "calibrate_rig": lambda **kw: [
+        pose
+        for rig in [
+            lidarcal.calibrate_rig(_skewed_corner().reference, [_skewed_corner().target], **kw)
+        ]
+        for pose in (rig.transforms["target0"], rig.pose_graph.iterations)
+    ],
+    "refine_pose_graph": lambda **kw: lidarcal.refine_pose_graph(*_pose_graph(), **kw),
+    "overlap": lambda **kw: [
+        _lidarcal.overlap(
+            _corner().reference, _corner().target, _corner().reference_from_target, **kw
+        )
+    ],
     "refine_point_to_line": lambda **kw: (
         _lidarcal.refine_point_to_line(
             np.array([[0, 0, 0, 0, 0, 1.0], [0, 0, 1, 1, 0, 0.0]]),
@@ -282,3 +354,11 @@ def test_omitting_a_keyword_equals_passing_the_rust_value(name: str) -> None:
     passed = CALLS[name](**explicit)
     for a, b in zip(left_out, passed, strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_calibrate_method_left_out_is_the_rust_default() -> None:
+    scene = _skewed_corner()
+    left_out = lidarcal.calibrate(scene.reference, scene.target)
+    passed = lidarcal.calibrate(scene.reference, scene.target, DEFAULTS["calibrate_rig"]["method"])
+    assert left_out.method == passed.method
+    np.testing.assert_array_equal(left_out.transform, passed.transform)
