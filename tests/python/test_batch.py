@@ -371,3 +371,32 @@ def test_a_csv_line_cut_by_a_crash_is_dropped_on_resume(tmp_path: Path) -> None:
     assert sorted(again.done) == ["a", "b"]
     assert output.read_text().endswith("\n") and output.read_text().count("\n") == 3
     assert [r["message"] for r in _rows(output)] == ["two lines", "two lines"]
+
+
+@pytest.mark.parametrize("ros1", [True, False], ids=["ros1", "ros2"])
+def test_rows_reading_ros_bag_topics(tmp_path: Path, ros1: bool) -> None:
+    """A row's clouds may be ``BAG:/topic`` (ROS 2 bags are folders), picked by its ``time``."""
+    from lidarcal import sim
+    from test_cli_calibrate import _write_bag
+
+    scene = sim.corner_scene(seed=0)
+    few = np.random.default_rng(0).normal(size=(5, 4)) * [1, 1, 1, 0]  # too few to check
+    bag = tmp_path / ("drive.bag" if ros1 else "drive")
+    _write_bag(bag, [few, scene.reference], ros1)  # both topics carry frame k at 100 + k s
+    identity = tmp_path / "identity.txt"
+    np.savetxt(identity, np.eye(4))
+    row = {"reference": f"{bag}:/points", "target": f"{bag}:/other", "transform": str(identity)}
+    first = batch.process_row({"id": "first", **row})  # no time: the first frame, 5 points
+    assert first["status"] == "error" and first["kind"] == "bad_input", first
+    second = batch.process_row({"id": "second", "time": "1", **row})  # the corner, 1 s later
+    assert second["status"] == "ok" and second["verdict"] == "consistent", second["message"]
+    # A pose 0.5 m off is flagged on the frame the time picks.
+    turned = tmp_path / "turned.txt"
+    pose = np.eye(4)
+    pose[:3, 3] = [0.5, 0.0, 0.0]
+    np.savetxt(turned, pose)
+    moved = batch.process_row({"id": "moved", "time": "1", **row, "transform": str(turned)})
+    assert moved["status"] == "ok" and moved["verdict"] == "inconsistent", moved["message"]
+    missing = batch.process_row({"id": "missing", **row, "target": f"{bag}:/nope"})
+    assert missing["status"] == "error" and missing["kind"] == "bad_file"
+    assert "/nope" in missing["message"]
