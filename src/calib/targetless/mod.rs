@@ -121,9 +121,9 @@ use self::hypotheses::{
     ground_sweep, hypotheses, in_range, slides, Candidate, Occupancy, SlideField, SLIDE_CELL,
     SLIDE_SAMPLES,
 };
-use self::observability::observability;
+use self::observability::{observability, Observability};
 use self::refine::{final_icp, refine_planes, PlaneRefinement};
-use self::rivals::{ambiguity_message, find_rival, Contest, LazyCheck};
+use self::rivals::{ambiguity_message, find_rival, Contest, LazyCheck, Rivalry};
 use self::segment::{check_cloud, prepare, Prepared};
 use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
 
@@ -208,59 +208,36 @@ pub fn calibrate_targetless(
     ensure_features(&reference_ds, &target_ds, options)?;
     clock.lap("planes");
 
-    // Step 3: hypotheses.
+    // Step 3: hypotheses, the ground sweep's, and slides along the pairs' free directions.
     let (enumerated, candidates, sweep) = plane_hypotheses(&reference_ds, &target_ds, options)?;
     clock.lap("hypotheses");
     let verifier = Verifier::new(&reference_ds.points, &target_ds.points, options.icp_options)?;
     clock.lap("normals");
-    let field = SlideField {
-        occupancy: Occupancy::new(&reference_ds.points, SLIDE_CELL),
-        samples: stride_sample(&target_ds.points, SLIDE_SAMPLES),
-    };
-    let paired = best_supported(&candidates, options);
-    let reach = options.max_translation * options.challenger_range;
-    let slid = slides(&paired, &field, verifier.reference_image(), reach);
-    let chosen: Vec<Candidate> = paired.iter().chain(&sweep).chain(&slid).copied().collect();
+    let field = slide_field(&reference_ds, &target_ds);
+    let chosen = with_slides(&candidates, &sweep, &field, &verifier, options);
     clock.lap("slides");
 
     // Step 4: verification, the best pose and its rivals.
     let pool = verify_hypotheses(&verifier, &chosen);
-    let contenders = || pool.iter().map(|(_, v)| *v);
-    let within = |v: &Verified| in_range(&v.pose, options.max_translation);
-    let settled = settle_best(&pool, &within, &|v| verifier.polish(v));
-    let (winner, top, runner_up) = settled.ok_or_else(no_overlap)?;
     let checks = LazyCheck::new(reference, target, &options.check);
-    ensure_best_acceptable(&top, runner_up.filter(within), &checks, options)?;
-    let contest = Contest::new(
-        top,
-        verifier.full_target_samples(),
-        &checks,
-        options.max_translation,
-    );
-    let rivalry = find_rival(
-        &contest,
-        runner_up,
-        contenders(),
-        &verifier,
-        &reference_ds,
-        winner.free,
-        &field,
-    )?;
+    let choice = choose(&verifier, &pool, &checks, &reference_ds, &field, options)?;
+    let top = choice.top;
     // Refused after the observability check below, whose reason is the more fundamental one
     // (a corridor is ambiguous along its axis because nothing constrains that direction).
-    let ambiguity = (rivalry.ambiguous && options.refuse_ambiguous)
-        .then(|| ambiguity_message(&top, &rivalry, options.max_translation));
+    let ambiguity = (choice.rivalry.ambiguous && options.refuse_ambiguous)
+        .then(|| ambiguity_message(&top, &choice.rivalry, options.max_translation));
     clock.lap("verify");
 
     // Step 5: refinement.
     let refined = refine_planes(&reference_ds, &target_ds, &top.pose, options)?;
     clock.lap("refine");
+    let contenders = pool.iter().map(|(_, v)| *v);
     let (pose, icp) = final_icp(
         &verifier,
         &checks,
         &refined.pose,
         &top.pose,
-        contenders(),
+        contenders,
         options,
         ambiguity.is_some(),
     )?;
@@ -274,29 +251,20 @@ pub fn calibrate_targetless(
     let check = checks.pair()?.certify(&pose)?;
     let planes = matched_planes(&reference_ds, &target_ds, &refined, &pose);
     clock.lap("check");
-    let details = TargetlessDetails {
-        hypothesis_counts: [enumerated, candidates.len()],
-        verified: chosen.len(),
-        triplet: !winner.sweep && winner.free.is_none(),
-        sweep: winner.sweep,
-        best_score: top.score,
-        second_score: rivalry.runner_up.map_or(0.0, |r| r.score.max(0.0)),
-        agreement: top.agreement,
-        violations: top.violations,
-        ambiguous: rivalry.ambiguous,
-        icp,
-        weakest_translation: observed.weakest_translation,
-        weakest_rotation: observed.weakest_rotation,
-        plane_translation_share: observed.plane_translation_share,
-        planes_reference: planes.planes_reference,
-        planes_target: planes.planes_target,
-        distance_thresholds: [reference_ds.threshold, target_ds.threshold],
-        features: [reference_ds.features, target_ds.features],
-        report: refined.report,
-    };
+    let counts = [enumerated, candidates.len(), chosen.len()];
+    let clouds = [reference_ds, target_ds];
+    let pairs = [planes.planes_reference, planes.planes_target];
+    let details = details(
+        &choice,
+        counts,
+        &observed,
+        clouds,
+        pairs,
+        (refined.report, icp),
+    );
     Ok(TargetlessCalibration {
         reference_from_target: pose,
-        initial_reference_from_target: winner.pose,
+        initial_reference_from_target: choice.winner.pose,
         check,
         rmse: planes.rmse,
         inliers_reference: planes.inliers_reference,
@@ -306,6 +274,106 @@ pub fn calibrate_targetless(
         timings: clock.finish(),
         details,
     })
+}
+
+/// What step 4 chose: the winning hypothesis, its verified (polished) pose, and what the search
+/// for a rival found.
+struct Choice {
+    winner: Candidate,
+    top: Verified,
+    rivalry: Rivalry,
+}
+
+/// Step 4: the best of the verified `pool` (settled against its close runner-ups by the full
+/// ICP), refused when it is no agreement or lies beyond max_translation, and the search for a
+/// rival among the contenders, the scene's half turns and the best pose's slides.
+fn choose(
+    verifier: &Verifier<'_>,
+    pool: &[(Candidate, Verified)],
+    checks: &LazyCheck<'_>,
+    reference: &Prepared,
+    field: &SlideField,
+    options: &TargetlessOptions,
+) -> Result<Choice> {
+    let within = |v: &Verified| in_range(&v.pose, options.max_translation);
+    let settled = settle_best(pool, &within, &|v| verifier.polish(v));
+    let (winner, top, runner_up) = settled.ok_or_else(no_overlap)?;
+    ensure_best_acceptable(&top, runner_up.filter(within), checks, options)?;
+    let samples = verifier.full_target_samples();
+    let contest = Contest::new(top, samples, checks, options.max_translation);
+    let contenders = pool.iter().map(|(_, v)| *v);
+    let rivalry = find_rival(
+        &contest,
+        runner_up,
+        contenders,
+        verifier,
+        reference,
+        winner.free,
+        field,
+    )?;
+    Ok(Choice {
+        winner,
+        top,
+        rivalry,
+    })
+}
+
+/// The reference's occupancy and the target's samples that score a slide (step 3).
+fn slide_field(reference: &Prepared, target: &Prepared) -> SlideField {
+    SlideField {
+        occupancy: Occupancy::new(&reference.points, SLIDE_CELL),
+        samples: stride_sample(&target.points, SLIDE_SAMPLES),
+    }
+}
+
+/// The hypotheses to verify: the best supported `candidates` (see [`best_supported`]), the ground
+/// `sweep`'s, and the supported pairs slid along their free direction to the peaks of the slide
+/// score within max_translation times challenger_range.
+fn with_slides(
+    candidates: &[Candidate],
+    sweep: &[Candidate],
+    field: &SlideField,
+    verifier: &Verifier<'_>,
+    options: &TargetlessOptions,
+) -> Vec<Candidate> {
+    let paired = best_supported(candidates, options);
+    let reach = options.max_translation * options.challenger_range;
+    let slid = slides(&paired, field, verifier.reference_image(), reach);
+    paired.iter().chain(sweep).chain(&slid).copied().collect()
+}
+
+/// The result's details: what the steps decided (`counts`: hypotheses enumerated, distinct,
+/// verified), the two clouds' planes, the `matched` ones (reference, target) and the `fits` (the
+/// plane refinement's report, the final ICP).
+fn details(
+    choice: &Choice,
+    counts: [usize; 3],
+    observed: &Observability,
+    [reference, target]: [Prepared; 2],
+    [planes_reference, planes_target]: [Vec<Plane>; 2],
+    (report, icp): (Option<LmReport>, Option<IcpResult>),
+) -> TargetlessDetails {
+    let (winner, top) = (&choice.winner, &choice.top);
+    TargetlessDetails {
+        hypothesis_counts: [counts[0], counts[1]],
+        verified: counts[2],
+        triplet: !winner.sweep && winner.free.is_none(),
+        sweep: winner.sweep,
+        best_score: top.score,
+        second_score: choice.rivalry.runner_up.map_or(0.0, |r| r.score.max(0.0)),
+        agreement: top.agreement,
+        violations: top.violations,
+        ambiguous: choice.rivalry.ambiguous,
+        icp,
+        weakest_translation: observed.weakest_translation,
+        weakest_rotation: observed.weakest_rotation,
+        plane_translation_share: observed.plane_translation_share,
+        planes_reference,
+        planes_target,
+        distance_thresholds: [reference.threshold, target.threshold],
+        features: [reference.features, target.features],
+        report,
+    }
 }
 
 /// The solver of the returned `pose`: the final ICP, unless it kept a pose without moving it
