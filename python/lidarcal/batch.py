@@ -53,6 +53,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from lidarcal.calibrate import METHOD_NAMES
+
 __all__ = [
     "COLUMNS",
     "Summary",
@@ -63,6 +65,19 @@ __all__ = [
     "simulate_fleet",
 ]
 
+#: The check's figures copied into each row (the CheckReport attributes of the same name).
+_CHECK_FIGURES = (
+    "overlap",
+    "agreement",
+    "reverse_agreement",
+    "violations",
+    "reverse_violations",
+    "rmse",
+    "correction_rotation_deg",
+    "correction_translation_m",
+    "detectable_rotation_deg",
+    "detectable_translation_m",
+)
 #: The result columns, in order.
 COLUMNS = (
     "id",
@@ -80,35 +95,12 @@ COLUMNS = (
     "yaw_deg",
     "verdict",
     "reason",
-    "overlap",
-    "agreement",
-    "reverse_agreement",
-    "violations",
-    "reverse_violations",
-    "rmse",
-    "correction_rotation_deg",
-    "correction_translation_m",
-    "detectable_rotation_deg",
-    "detectable_translation_m",
+    *_CHECK_FIGURES,
     "runtime_s",
     "worker",
 )
 _TEXT = ("id", "job", "status", "kind", "message", "method", "verdict", "reason", "worker")
-#: The check's figures copied into each row (the CheckReport attributes of the same name).
-_CHECK_FIGURES = (
-    "overlap",
-    "agreement",
-    "reverse_agreement",
-    "violations",
-    "reverse_violations",
-    "rmse",
-    "correction_rotation_deg",
-    "correction_translation_m",
-    "detectable_rotation_deg",
-    "detectable_translation_m",
-)
 _MANIFEST_COLUMNS = ("id", "reference", "target", "time", "method", "up", "transform")
-_METHODS = ("auto", "planes", "targetless", "poles")
 
 
 # --------------------------------------------------------------------------------------------
@@ -248,8 +240,8 @@ class _RowError(Exception):
 
 def _options(job: dict[str, str | None]) -> tuple[str, list[float] | None, float | None]:
     method = (job.get("method") or "auto").lower()
-    if method not in _METHODS:
-        raise _RowError("bad_row", f"method {method!r} is not one of {', '.join(_METHODS)}")
+    if method not in METHOD_NAMES:
+        raise _RowError("bad_row", f"method {method!r} is not one of {', '.join(METHOD_NAMES)}")
     up = None
     if job.get("up"):
         try:

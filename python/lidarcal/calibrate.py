@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -30,6 +30,8 @@ from lidarcal._lidarcal import (
 )
 
 Method = Literal["auto", "planes", "targetless", "poles"]
+#: The method names (``Method``'s values), for the checks and the command line.
+METHOD_NAMES: tuple[Method, ...] = get_args(Method)
 Vendor = Literal["velodyne", "hesai", "leishen", "robosense"]
 F64Array = npt.NDArray[np.float64]
 
@@ -50,6 +52,12 @@ _DEFAULT_METHOD: Method = _lidarcal._defaults()["calibrate_rig"]["method"]
 #: A target pair is calibrated directly in :func:`calibrate_rig` only when the result brings at
 #: least this fraction of its points onto the other cloud.
 MIN_PAIR_OVERLAP: float = _lidarcal.MIN_PAIR_OVERLAP
+
+
+def _unknown_method(method: object) -> str:
+    """The message of the Rust ``Method::from_name`` for an unknown name."""
+    *first, last = (repr(m) for m in METHOD_NAMES)
+    return f"method must be {', '.join(first)} or {last}, got {method!r}"
 
 
 def _cloud(points: npt.ArrayLike, name: str) -> F64Array:
@@ -109,9 +117,7 @@ def calibrate(
             max_bright_fraction=max_bright_fraction,
         )
     if method != "auto":
-        raise ValueError(
-            f"method must be 'auto', 'planes', 'targetless' or 'poles', got {method!r}"
-        )
+        raise ValueError(_unknown_method(method))
     return _lidarcal.calibrate_auto(
         ref,
         tgt,
@@ -250,10 +256,8 @@ def calibrate_rig(
         clouds = {f"target{i}": _cloud(v, f"target{i}") for i, v in enumerate(targets)}
     if not clouds:
         raise ValueError("targets is empty")
-    if method not in (None, "auto", "planes", "targetless", "poles"):
-        raise ValueError(
-            f"method must be 'auto', 'planes', 'targetless' or 'poles', got {method!r}"
-        )
+    if method is not None and method not in METHOD_NAMES:
+        raise ValueError(_unknown_method(method))
     out = _lidarcal.calibrate_rig(
         ref,
         list(clouds.items()),

@@ -40,6 +40,7 @@ from lidarcal import (
     sim,
 )
 from lidarcal._lidarcal import _defaults
+from lidarcal.calibrate import METHOD_NAMES
 from lidarcal.export import (
     OUTPUT_SUFFIXES,
     frame_id,
@@ -499,7 +500,7 @@ def _rig_entries(
 @click.argument("targets", nargs=-1, required=True, type=SourceType())
 @click.option(
     "--method",
-    type=click.Choice(["auto", "planes", "targetless", "poles"]),
+    type=click.Choice(METHOD_NAMES),
     default=_METHOD,
     show_default=True,
     help="auto: try every method that applies and keep the certified result that fits best "
