@@ -16,6 +16,7 @@
 //!
 //! The entry points of [`method`] and [`rig`] and the types of [`result`] are re-exported here.
 
+pub(crate) mod input;
 pub mod method;
 pub mod planes;
 pub mod poles;

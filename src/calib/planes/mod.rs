@@ -42,8 +42,9 @@
 //!    the pose passes through [`crate::check`] ([`PlanarOptions::check`], by default
 //!    [`CheckOptions::fitted`]).
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Vector3};
 
+use super::input::{isometry, with_cloud};
 pub use super::result::PlanarCalibration;
 use super::result::Refinement;
 use super::Stopwatch;
@@ -252,50 +253,10 @@ const IRLS_RELATIVE_STEP: f64 = 1e-3;
 /// ... or, whatever the covariance, by less than this (tangent norm: 10 nm, 0.01 micro-radian).
 const IRLS_STEP_TOLERANCE: f64 = 1e-8;
 
-/// Prefixes calibration errors with the cloud they concern.
-fn with_cloud(e: Error, which: &str) -> Error {
-    match e {
-        Error::Degenerate(m) => {
-            Error::calibration(FailureKind::TooFewFeatures, format!("{which} cloud: {m}"))
-        }
-        e @ Error::Calibration { .. } => e.context(&format!("{which} cloud")),
-        other => other,
-    }
-}
-
-fn isometry(rotation: &nalgebra::Rotation3<f64>, t: Vector3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::from(t),
-        UnitQuaternion::from_rotation_matrix(rotation),
-    )
-}
-
-/// A cloud whose nearest point is farther than this from the origin is taken not to be in its
-/// sensor's frame: every LiDAR sees something (the ground, its mount) within tens of metres, and
-/// the planes' normals are oriented toward the origin as the sensor, so a far origin flips them
-/// and can turn a calibration by 180 degrees while every check still passes.
-const MAX_NEAREST_RANGE: f64 = 50.0;
-
+/// The corner method's input rules ([`check_cloud`](crate::calib::input::check_cloud)): three
+/// planes need at least 9 points.
 fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
-    if points.len() < 9 {
-        return Err(Error::InvalidInput(format!(
-            "the {which} cloud has {} points; three planes need at least 9",
-            points.len()
-        )));
-    }
-    crate::error::ensure_points(which, points.iter())?;
-    let nearest = points
-        .iter()
-        .map(|p| p.coords.norm())
-        .fold(f64::INFINITY, f64::min);
-    if nearest > MAX_NEAREST_RANGE {
-        return Err(Error::InvalidInput(format!(
-            "the {which} cloud's nearest point is {nearest:.1} m from the origin: each cloud must \
-             be in its own sensor's frame (origin at the sensor), which a LiDAR never sees only \
-             beyond {MAX_NEAREST_RANGE} m"
-        )));
-    }
-    Ok(())
+    crate::calib::input::check_cloud(points, which, 9, "three planes need")
 }
 
 /// `Err(InvalidInput)` for a malformed cloud ([`check_cloud`]), loss or distance threshold.
@@ -446,6 +407,7 @@ mod tests {
     use crate::geometry::se3_log;
     use crate::lm::solve;
     use crate::residuals::{Frame, PlaneGroup, PointToPlane};
+    use nalgebra::Isometry3;
 
     #[test]
     fn a_cloud_far_from_its_origin_is_refused() {

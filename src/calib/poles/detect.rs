@@ -9,6 +9,7 @@ use super::hypotheses::*;
 use super::options::*;
 use super::threshold::*;
 use crate::budget::Deadline;
+use crate::calib::input::with_cloud;
 use crate::cluster::euclidean_clusters_until;
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
@@ -288,15 +289,4 @@ pub(super) fn check_poles(extraction: &PoleExtraction, which: &str) -> Result<()
         ));
     }
     Ok(())
-}
-
-pub(super) fn with_cloud(e: Error, which: &str) -> Error {
-    match e {
-        Error::Degenerate(m) => {
-            Error::calibration(FailureKind::TooFewFeatures, format!("{which} cloud: {m}"))
-        }
-        e @ Error::Calibration { .. } => e.context(&format!("{which} cloud")),
-        Error::InvalidInput(m) => Error::InvalidInput(format!("{which} cloud: {m}")),
-        other => other,
-    }
 }

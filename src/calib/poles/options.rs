@@ -136,19 +136,7 @@ pub(super) fn check_cloud(points: &[Point3<f64>], intensities: &[f64], which: &s
             intensities.len()
         )));
     }
-    let bad: Vec<usize> = points
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| !p.coords.iter().all(|x| x.is_finite()))
-        .map(|(i, _)| i)
-        .collect();
-    if let Some(first) = bad.first() {
-        return Err(Error::InvalidInput(format!(
-            "the {which} cloud has {} point(s) with non-finite coordinates, the first in row {first}",
-            bad.len()
-        )));
-    }
-    crate::error::ensure_points(&format!("the {which} cloud"), points.iter())?;
+    crate::calib::input::check_cloud(points, which, 1, "the pole method needs")?;
     let bad = intensities.iter().filter(|x| !x.is_finite()).count();
     if let Some(first) = intensities.iter().position(|x| !x.is_finite()) {
         return Err(Error::InvalidInput(format!(

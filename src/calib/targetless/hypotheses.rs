@@ -3,11 +3,12 @@
 
 use std::collections::{HashMap, HashSet};
 
-use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Vector3};
 
 use super::options::TargetlessOptions;
 use super::segment::PlaneFeature;
 use super::verify::VIOLATION_WEIGHT;
+use crate::calib::input::isometry;
 use crate::kabsch::kabsch;
 use crate::visibility::RangeImage;
 
@@ -43,13 +44,6 @@ const SLIDE_MIN: f64 = 0.75;
 /// Local maxima of the slide score of the best pose probed for a repeated structure (see
 /// [`calibrate_targetless`]).
 pub(super) const SLIDE_PEAKS: usize = 2;
-
-pub(super) fn isometry(rotation: &nalgebra::Rotation3<f64>, t: Vector3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::from(t),
-        UnitQuaternion::from_rotation_matrix(rotation),
-    )
-}
 
 /// A candidate transform from plane correspondences.
 #[derive(Debug, Clone, Copy)]
@@ -490,6 +484,7 @@ pub(super) fn mapped(points: &[Point3<f64>], pose: &Isometry3<f64>) -> Vec<Point
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::UnitQuaternion;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

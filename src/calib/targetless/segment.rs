@@ -5,7 +5,7 @@ use nalgebra::{Point3, Vector3};
 
 use super::super::planes::estimate_threshold;
 use super::options::TargetlessOptions;
-use crate::error::{ensure_finite, Error, Result};
+use crate::error::{Error, Result};
 use crate::fit::Moments;
 use crate::geometry::Plane;
 use crate::icp::voxel_downsample;
@@ -404,13 +404,8 @@ pub fn plane_features(
     Ok((p.features, p.threshold))
 }
 
-/// `Err(InvalidInput)` for a cloud of fewer than 100 points or with non-finite coordinates.
+/// The targetless method's input rules ([`check_cloud`](crate::calib::input::check_cloud)): at
+/// least 100 points.
 pub(super) fn check_cloud(points: &[Point3<f64>], which: &str) -> Result<()> {
-    if points.len() < 100 {
-        return Err(Error::InvalidInput(format!(
-            "the {which} cloud has {} points; the targetless method needs at least 100",
-            points.len()
-        )));
-    }
-    ensure_finite(which, points.iter().flat_map(|p| p.coords.iter()))
+    crate::calib::input::check_cloud(points, which, 100, "the targetless method needs")
 }
