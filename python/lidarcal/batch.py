@@ -217,14 +217,9 @@ def _manifest_ids(path: Path) -> tuple[int, set[str]]:
 def _load(text: str, at: float | None) -> np.ndarray:
     """A cloud from ``FILE`` or ``BAG:/topic`` (as on the command line)."""
     from lidarcal import read_points
-    from lidarcal.rosbag import is_bag, read_bag
+    from lidarcal.rosbag import is_bag, read_bag, split_source
 
-    path, topic = Path(text), None
-    if not path.exists():
-        head, sep, tail = text.rpartition(":/")
-        if not (sep and Path(head).exists()):
-            raise FileNotFoundError(f"{text}: no such file")
-        path, topic = Path(head), "/" + tail
+    path, topic = split_source(text)
     if topic is not None or is_bag(path):
         return read_bag(path, topic, time=at)
     return read_points(path)

@@ -49,6 +49,7 @@ from lidarcal.export import (
     to_dict,
     write_result,
 )
+from lidarcal.rosbag import split_source
 
 # Defaults from Rust (`--help` shows them): the beam model (`Preset::default()`), the corner
 # scene's options (`CornerOptions::default()`), the calibration method (`Method::default()`, as
@@ -295,13 +296,10 @@ class SourceType(click.ParamType):  # type: ignore[type-arg]
         if isinstance(value, Source):
             return value
         text = str(value)
-        path = Path(text)
-        if path.exists():
-            return Source(text, path, None)
-        head, sep, tail = text.rpartition(":/")
-        if sep and Path(head).exists():
-            return Source(text, Path(head), "/" + tail)
-        self.fail(f"{text}: no such file (a bag topic is given as BAG:/topic)", param, ctx)
+        try:
+            return Source(text, *split_source(text))
+        except FileNotFoundError:
+            self.fail(f"{text}: no such file (a bag topic is given as BAG:/topic)", param, ctx)
 
 
 def load_cloud(

@@ -23,7 +23,7 @@ from lidarcal._lidarcal import INTENSITY_NAMES, FileFormatError
 
 F64Array = npt.NDArray[np.float64]
 
-__all__ = ["BAG_SUFFIXES", "is_bag", "read_bag"]
+__all__ = ["BAG_SUFFIXES", "is_bag", "read_bag", "split_source"]
 
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 POINTCLOUD2 = ("sensor_msgs/msg/PointCloud2", "sensor_msgs/PointCloud2")
@@ -36,6 +36,19 @@ def is_bag(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` is a ROS bag: a ``.bag``/``.db3``/``.mcap`` file or a ROS 2 bag folder."""
     p = Path(path)
     return p.suffix.lower() in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").exists())
+
+
+def split_source(text: str) -> tuple[Path, str | None]:
+    """A cloud source as the command line and the batch manifests write it, ``FILE`` or
+    ``BAG:/topic``: its path and its topic (None for a plain path). Raises ``FileNotFoundError``
+    when neither names something that exists."""
+    path = Path(text)
+    if path.exists():
+        return path, None
+    head, sep, tail = text.rpartition(":/")
+    if sep and Path(head).exists():
+        return Path(head), "/" + tail
+    raise FileNotFoundError(f"{text}: no such file")
 
 
 def _find(names: Sequence[str], wanted: str) -> str | None:
