@@ -62,10 +62,20 @@ use kiddo::SquaredEuclidean;
 use crate::error::{ensure_finite, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::se3_exp;
+use crate::grid::NeighbourGrid;
 use crate::lm::{accumulate, Accumulator, Loss, NormalEquations};
 
 /// Neighbours used to estimate each reference point's normal.
 const NORMAL_NEIGHBOURS: usize = 10;
+/// Cell side (metres) of a [`SurfaceCloud`]'s hash grid: it answers nearest-neighbour queries up
+/// to this radius (every gate of the check and the verification but the first step of a ground
+/// sweep's screening, which the k-d tree serves). On a 40k-voxel street scan 1 m cells answered
+/// 30 cm and 1 m queries in 144 and 228 ns (the k-d tree: 354 and 582), and 50 cm cells, which
+/// reach only 50 cm, in 134 ns.
+const GRID_CELL: f64 = 1.0;
+/// Radius (metres) of the grid's search for a point's ten neighbours: at the 10 cm voxels of the
+/// check and the verification, they lie within about 20 cm on any surface.
+const NEIGHBOURHOOD_BOUND: f64 = 0.5;
 /// Largest surface variation `l0 / (l0 + l1 + l2)` of a neighbourhood that still counts as a
 /// surface (0 for a perfect plane, 1/3 for isotropic scatter).
 const MAX_SURFACE_VARIATION: f64 = 0.08;
@@ -87,11 +97,7 @@ pub fn voxel_downsample(
         )));
     }
     ensure_finite("points", points.iter().flat_map(|p| p.coords.iter()))?;
-    let mut index: rustc_hash::FxHashMap<[i64; 3], usize> =
-        rustc_hash::FxHashMap::with_capacity_and_hasher(points.len() / 2, Default::default());
-    let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new();
-    let mut owner = Vec::with_capacity(points.len());
-    for p in points {
+    let cell = |p: &Point3<f64>| -> Result<[i64; 3]> {
         let mut key = [0i64; 3];
         for (k, c) in key.iter_mut().zip(p.coords.iter()) {
             let f = (c / voxel).floor();
@@ -102,6 +108,54 @@ pub fn voxel_downsample(
             }
             *k = f as i64;
         }
+        Ok(key)
+    };
+    // Voxel indices within +/-2^20 on every axis (100 km at 10 cm) pack into one u64, which
+    // hashes 1.5-2x faster than three; a cloud reaching beyond falls back to the full keys. Both
+    // give the same voxels in the same order.
+    let packed = group_by_key(points, |p| {
+        let key = cell(p)?;
+        Ok(key
+            .iter()
+            .all(|k| k.unsigned_abs() < PACKED_HALF_RANGE)
+            .then(|| {
+                key.iter().fold(0u64, |acc, &k| {
+                    (acc << PACKED_BITS) | (k + PACKED_HALF_RANGE as i64) as u64
+                })
+            }))
+    })?;
+    let (sums, owner) = match packed {
+        Some(grouped) => grouped,
+        None => group_by_key(points, |p| cell(p).map(Some))?
+            .ok_or_else(|| Error::Numerical("voxel keys could not be formed".into()))?,
+    };
+    let centroids = sums
+        .into_iter()
+        .map(|(sum, n)| Point3::from(sum / n.max(1) as f64))
+        .collect();
+    Ok((centroids, owner))
+}
+
+/// Bits per axis of a packed voxel key in [`voxel_downsample`].
+const PACKED_BITS: u32 = 21;
+/// Voxel indices below this in magnitude fit a packed key.
+const PACKED_HALF_RANGE: u64 = 1 << (PACKED_BITS - 1);
+
+/// Per-voxel coordinate sums and counts in the order the voxels are first met, and each point's
+/// voxel, for the voxel key `key_of` gives each point; `None` as soon as it gives `None`.
+#[allow(clippy::type_complexity)]
+fn group_by_key<K: std::hash::Hash + Eq>(
+    points: &[Point3<f64>],
+    key_of: impl Fn(&Point3<f64>) -> Result<Option<K>>,
+) -> Result<Option<(Vec<(Vector3<f64>, usize)>, Vec<usize>)>> {
+    let mut index: rustc_hash::FxHashMap<K, usize> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(points.len() / 2, Default::default());
+    let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new();
+    let mut owner = Vec::with_capacity(points.len());
+    for p in points {
+        let Some(key) = key_of(p)? else {
+            return Ok(None);
+        };
         let next = sums.len();
         let slot = *index.entry(key).or_insert(next);
         if slot == next {
@@ -113,11 +167,7 @@ pub fn voxel_downsample(
         }
         owner.push(slot);
     }
-    let centroids = sums
-        .into_iter()
-        .map(|(sum, n)| Point3::from(sum / n.max(1) as f64))
-        .collect();
-    Ok((centroids, owner))
+    Ok(Some((sums, owner)))
 }
 
 /// The k-d tree of a [`SurfaceCloud`]: `f64` coordinates, `u32` point indices, 3-D, 32 points per
@@ -135,6 +185,8 @@ pub struct SurfaceCloud {
     points: Vec<Point3<f64>>,
     normals: Vec<OnceLock<Option<Vector3<f64>>>>,
     tree: Tree,
+    /// For the bounded nearest-neighbour queries within its reach (most of them).
+    grid: NeighbourGrid,
 }
 
 impl SurfaceCloud {
@@ -155,12 +207,16 @@ impl SurfaceCloud {
             )));
         }
         let coordinates: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-        let tree = Tree::new_from_slice(&coordinates);
+        let (tree, grid) = crate::join(
+            || Tree::new_from_slice(&coordinates),
+            || NeighbourGrid::new(&points, GRID_CELL),
+        );
         let normals = (0..points.len()).map(|_| OnceLock::new()).collect();
         Ok(SurfaceCloud {
             points,
             normals,
             tree,
+            grid,
         })
     }
 
@@ -168,9 +224,27 @@ impl SurfaceCloud {
     fn neighbourhood(&self, p: &Point3<f64>) -> Moments {
         let mut m = Moments::new(*p);
         let k = NonZeroUsize::new(NORMAL_NEIGHBOURS).unwrap_or(NonZeroUsize::MIN);
-        for n in self.tree.nearest_n::<SquaredEuclidean>(&[p.x, p.y, p.z], k) {
-            if let Some(q) = self.points.get(n.item as usize) {
-                m.add(q);
+        // The grid finds the ten nearest, nearest first, when they lie within its bound (on
+        // any surface at the check's 10 cm voxels); the k-d tree's unbounded search, several
+        // times slower, serves sparse clouds.
+        match self
+            .grid
+            .nearest_k(p, NORMAL_NEIGHBOURS, NEIGHBOURHOOD_BOUND)
+        {
+            Some(near) => {
+                for (i, _) in near {
+                    if let Some(q) = self.points.get(i) {
+                        m.add(q);
+                    }
+                }
+            }
+            None => {
+                let q = [p.x, p.y, p.z];
+                for n in self.tree.nearest_n::<SquaredEuclidean>(&q, k) {
+                    if let Some(q) = self.points.get(n.item as usize) {
+                        m.add(q);
+                    }
+                }
             }
         }
         m
@@ -214,6 +288,9 @@ impl SurfaceCloud {
 
     /// The nearest point to `q` within `max_distance`: `(index, squared distance)`.
     pub fn nearest(&self, q: &Point3<f64>, max_distance: f64) -> Option<(usize, f64)> {
+        if self.grid.reaches(max_distance) {
+            return self.grid.nearest(q, max_distance);
+        }
         // A search bounded by the distance: an unbounded nearest-neighbour query from a point far
         // from the cloud (most of a partial overlap) walks much of the tree.
         self.tree
@@ -612,6 +689,30 @@ mod tests {
         assert!((c[0].x - 0.1).abs() < 1e-12);
         assert!(voxel_downsample(&pts, 0.0).is_err());
         assert!(voxel_downsample(&[Point3::new(f64::NAN, 0.0, 0.0)], 1.0).is_err());
+    }
+
+    #[test]
+    fn packed_and_full_voxel_keys_give_the_same_voxels() {
+        // Negative and positive coordinates near the voxel edges; one point 200 km out (beyond the
+        // packed keys at 10 cm) sends the whole cloud down the full-key path.
+        let near: Vec<Point3<f64>> = (0..500)
+            .map(|i| {
+                let f = i as f64;
+                Point3::new(
+                    (f * 0.37).sin() * 3.0,
+                    (f * 0.11).cos() * -2.0,
+                    f * 0.013 - 3.0,
+                )
+            })
+            .collect();
+        let (packed, packed_owner) = voxel_downsample(&near, 0.1).unwrap();
+        let mut with_far = near.clone();
+        with_far.push(Point3::new(-2.0e5, 0.0, 0.0));
+        let (full, full_owner) = voxel_downsample(&with_far, 0.1).unwrap();
+        assert_eq!(full.len(), packed.len() + 1);
+        assert_eq!(&full[..packed.len()], &packed[..]);
+        assert_eq!(&full_owner[..near.len()], &packed_owner[..]);
+        assert!(packed.len() > 100 && packed.len() < near.len());
     }
 
     #[test]

@@ -125,6 +125,7 @@ pub mod cluster;
 pub mod error;
 pub mod fit;
 pub mod geometry;
+mod grid;
 pub mod icp;
 pub mod kabsch;
 pub mod lm;
