@@ -134,20 +134,8 @@ impl PointToPlane {
     /// logarithms). Iterating "solve it, re-weight at the solution" converges to a stationary
     /// point of this robust problem: there `sum rho'(r^2) r J = 0`, its gradient.
     pub fn reweighted(&self, pose: &Isometry3<f64>) -> Result<PlaneMomentsProblem> {
-        let weigh = |g: &PlaneGroup| {
-            let term = PlaneTerm::new(g, pose);
-            let origin = g.points.first().copied().unwrap_or_else(Point3::origin);
-            let mut moments = Moments::new(origin);
-            for p in &g.points {
-                let r = term.distance(p);
-                moments.add_weighted(p, self.loss.weight(r * r));
-            }
-            PlaneMomentGroup {
-                plane: g.plane,
-                moments,
-                frame: g.frame,
-            }
-        };
+        let weigh =
+            |g: &PlaneGroup| reweighted_group(&g.plane, g.frame, g.points.iter(), pose, self.loss);
         // Groups are independent: in parallel, each summed in order, so the result is the same
         // for any thread count.
         #[cfg(feature = "parallel")]
@@ -171,6 +159,49 @@ impl PointToPlane {
     }
 }
 
+/// The weighted moments of one IRLS step for the points of one plane group (in `frame`, the
+/// plane in the other frame) at `pose`: each point weighted by `rho'(r^2)` of its residual, in
+/// the order given, relative to the first point. [`PointToPlane::reweighted`] runs it per group;
+/// the corner method runs it on its inliers in place, without copying them.
+pub(crate) fn reweighted_group<'p>(
+    plane: &Plane,
+    frame: Frame,
+    points: impl Iterator<Item = &'p Point3<f64>>,
+    pose: &Isometry3<f64>,
+    loss: Loss,
+) -> PlaneMomentGroup {
+    let term = PlaneTerm::of(plane, frame, pose);
+    let mut points = points.peekable();
+    let origin = points.peek().map_or_else(Point3::origin, |p| **p);
+    let mut moments = Moments::new(origin);
+    for p in points {
+        let r = term.distance(p);
+        moments.add_weighted(p, loss.weight(r * r));
+    }
+    PlaneMomentGroup {
+        plane: *plane,
+        moments,
+        frame,
+    }
+}
+
+/// The cost `1/2 sum rho(r^2)` (in [`NormalEquations::cost`]) of the points `point(item)` of one
+/// plane group at `pose`, summed in fixed chunks ([`accumulate`]).
+pub(crate) fn plane_cost<T: Sync>(
+    plane: &Plane,
+    frame: Frame,
+    items: &[T],
+    point: impl Fn(&T) -> Point3<f64> + Sync,
+    pose: &Isometry3<f64>,
+    loss: Loss,
+) -> NormalEquations {
+    let term = PlaneTerm::of(plane, frame, pose);
+    accumulate(items, |item, acc: &mut NormalEquations| {
+        let r = term.distance(&point(item));
+        acc.add_cost(r * r, 1, loss);
+    })
+}
+
 /// A plane group prepared for a given pose: the plane and the point map in one frame.
 struct PlaneTerm {
     frame: Frame,
@@ -182,15 +213,19 @@ struct PlaneTerm {
 
 impl PlaneTerm {
     fn new(group: &PlaneGroup, pose: &Isometry3<f64>) -> Self {
-        match group.frame {
+        Self::of(&group.plane, group.frame, pose)
+    }
+
+    fn of(plane: &Plane, frame: Frame, pose: &Isometry3<f64>) -> Self {
+        match frame {
             Frame::Target => PlaneTerm {
                 frame: Frame::Target,
-                normal: group.plane.normal.into_inner(),
-                offset: group.plane.offset,
+                normal: plane.normal.into_inner(),
+                offset: plane.offset,
                 pose: *pose,
             },
             Frame::Reference => {
-                let plane = group.plane.transformed(pose);
+                let plane = plane.transformed(pose);
                 PlaneTerm {
                     frame: Frame::Reference,
                     normal: plane.normal.into_inner(),
@@ -261,16 +296,18 @@ impl LeastSquaresProblem for PointToPlane {
         let loss = self.loss;
         let mut total = NormalEquations::default();
         for g in &self.groups {
-            let term = PlaneTerm::new(g, pose);
             if !with_derivatives {
-                let part: NormalEquations =
-                    accumulate(&g.points, |p, acc: &mut NormalEquations| {
-                        let r = term.distance(p);
-                        acc.add_cost(r * r, 1, loss);
-                    });
-                total.merge(&part);
+                total.merge(&plane_cost(
+                    &g.plane,
+                    g.frame,
+                    &g.points,
+                    |p| *p,
+                    pose,
+                    loss,
+                ));
                 continue;
             }
+            let term = PlaneTerm::new(g, pose);
             let sums: WeightedSums = accumulate(&g.points, |p, acc: &mut WeightedSums| {
                 let q = match term.frame {
                     Frame::Target => (term.pose * p).coords,

@@ -4,7 +4,7 @@ use nalgebra::Point3;
 
 use super::{CheckOptions, THICKNESS_SAMPLES};
 use crate::error::Result;
-use crate::icp::{voxel_downsample, SurfaceCloud};
+use crate::icp::{voxel_centroids, SurfaceCloud};
 use crate::visibility::RangeImage;
 
 /// One cloud, downsampled and indexed, with its sensor's range image.
@@ -35,7 +35,7 @@ impl Side {
     pub(super) fn new(points: &[Point3<f64>], options: &CheckOptions) -> Result<Self> {
         let (indexed, image) = crate::join(
             || -> Result<_> {
-                let (voxels, _) = voxel_downsample(points, options.voxel_size)?;
+                let voxels = voxel_centroids(points, options.voxel_size)?;
                 let stride = voxels.len().div_ceil(options.samples).max(1);
                 let samples = voxels.iter().step_by(stride).copied().collect();
                 Ok((SurfaceCloud::new(voxels)?, samples))

@@ -246,13 +246,20 @@ pub fn extract_planes(
         if remaining.len() < min_inliers {
             break;
         }
-        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
+        // Until a plane is taken the remaining points are the cloud itself: no copy of it.
+        let copy: Vec<Point3<f64>>;
+        let subset: &[Point3<f64>] = if remaining.len() == points.len() {
+            points
+        } else {
+            copy = remaining.iter().map(|&i| points[i]).collect();
+            &copy
+        };
         let ransac_options = RansacOptions {
             seed: mix_seed(options.ransac.seed, run),
             ..options.ransac
         };
         run += 1;
-        let result = match ransac(&PlaneEstimator, &subset, &ransac_options) {
+        let result = match ransac(&PlaneEstimator, subset, &ransac_options) {
             Ok(r) => r,
             Err(Error::Degenerate(_)) => break,
             Err(e) => return Err(e),

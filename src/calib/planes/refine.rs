@@ -8,12 +8,14 @@ use super::{
     PlanarOptions, DEFAULT_CAUCHY_SCALE, IRLS_MAX_ROUNDS, IRLS_RELATIVE_STEP, IRLS_STEP_TOLERANCE,
 };
 use crate::budget::Deadline;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::fit::Moments;
 use crate::geometry::{se3_log, Plane};
 use crate::lm::{solve, LeastSquaresProblem, LmOptions, LmReport, LmSolution, Loss, Termination};
 use crate::ransac::plane::ExtractedPlane;
-use crate::residuals::{Frame, PlaneGroup, PlaneMomentGroup, PlaneMomentsProblem, PointToPlane};
+use crate::residuals::{
+    plane_cost, reweighted_group, Frame, PlaneMomentGroup, PlaneMomentsProblem, PointToPlane,
+};
 
 /// Robust refinement by iteratively reweighted least squares on weighted sufficient statistics:
 /// each round weights the points by `rho'(r^2)` at the current pose (one pass) and solves that
@@ -21,7 +23,7 @@ use crate::residuals::{Frame, PlaneGroup, PlaneMomentGroup, PlaneMomentsProblem,
 /// cost, the same estimate a robust Levenberg–Marquardt reaches, at a fraction of the passes
 /// over the points. The report is the last round's, with the robust cost at the start and end.
 pub(super) fn irls(
-    problem: &PointToPlane,
+    problem: &impl Reweighting,
     start: &LmSolution,
     lm: &LmOptions,
     deadline: &Deadline,
@@ -53,12 +55,109 @@ pub(super) fn irls(
         }
     }
     solution.report.iterations = iterations;
-    solution.report.initial_cost = problem.normal_equations(&start.pose, false).cost;
-    solution.report.final_cost = problem.normal_equations(&solution.pose, false).cost;
+    solution.report.initial_cost = problem.cost(&start.pose);
+    solution.report.final_cost = problem.cost(&solution.pose);
     if !converged {
         solution.report.termination = Termination::MaxIterations;
     }
     Ok(solution)
+}
+
+/// What [`irls`] needs of a robust point-to-plane problem.
+pub(super) trait Reweighting: Sync {
+    /// The weighted least-squares problem of one IRLS step at `pose`
+    /// ([`PointToPlane::reweighted`]).
+    fn reweighted(&self, pose: &Isometry3<f64>) -> Result<PlaneMomentsProblem>;
+    /// The robust cost at `pose`.
+    fn cost(&self, pose: &Isometry3<f64>) -> f64;
+}
+
+impl Reweighting for PointToPlane {
+    fn reweighted(&self, pose: &Isometry3<f64>) -> Result<PlaneMomentsProblem> {
+        PointToPlane::reweighted(self, pose)
+    }
+
+    fn cost(&self, pose: &Isometry3<f64>) -> f64 {
+        self.normal_equations(pose, false).cost
+    }
+}
+
+/// One group of [`InlierPlanes`]: the plane, the frame of the points, their cloud and their
+/// indices in it.
+type InlierGroup<'a> = (Plane, Frame, &'a [Point3<f64>], &'a [usize]);
+
+/// The matched planes' inliers, read in place from the clouds by index, under a robust loss:
+/// the same problem as a [`PointToPlane`] of the selected points, in the same order (so the same
+/// sums), without a copy of every inlier (half the input's size on two 1M-point scans).
+struct InlierPlanes<'a> {
+    groups: Vec<InlierGroup<'a>>,
+    loss: Loss,
+}
+
+impl<'a> InlierPlanes<'a> {
+    /// The six groups of `pairs` (each reference plane with the target's inliers, each target
+    /// plane with the reference's): `Err` for an invalid loss or an empty group, as
+    /// [`PointToPlane::new`] would give.
+    fn new(pairs: &PlanePairs<'a>, loss: Loss) -> Result<Self> {
+        loss.validate()?;
+        let mut groups = Vec::with_capacity(6);
+        for i in 0..3 {
+            if let (Some(plane_ref), Some(plane_tgt), Some(in_tgt), Some(in_ref)) = (
+                pairs.planes_ref.get(i),
+                pairs.planes_tgt.get(i),
+                pairs.inliers_tgt.get(i),
+                pairs.inliers_ref.get(i),
+            ) {
+                groups.push((*plane_ref, Frame::Target, pairs.target, in_tgt.as_slice()));
+                groups.push((
+                    *plane_tgt,
+                    Frame::Reference,
+                    pairs.reference,
+                    in_ref.as_slice(),
+                ));
+            }
+        }
+        for (index, (_, _, cloud, indices)) in groups.iter().enumerate() {
+            if indices.is_empty() {
+                return Err(Error::InvalidInput(format!(
+                    "plane group {index} has no points"
+                )));
+            }
+            if indices.iter().any(|&i| i >= cloud.len()) {
+                return Err(Error::Numerical(format!(
+                    "plane group {index} has an inlier index beyond its cloud"
+                )));
+            }
+        }
+        Ok(InlierPlanes { groups, loss })
+    }
+}
+
+impl Reweighting for InlierPlanes<'_> {
+    fn reweighted(&self, pose: &Isometry3<f64>) -> Result<PlaneMomentsProblem> {
+        let weigh = |&(plane, frame, cloud, indices): &InlierGroup<'_>| {
+            let points = indices.iter().filter_map(|&i| cloud.get(i));
+            reweighted_group(&plane, frame, points, pose, self.loss)
+        };
+        #[cfg(feature = "parallel")]
+        let groups = {
+            use rayon::prelude::*;
+            self.groups.par_iter().map(weigh).collect()
+        };
+        #[cfg(not(feature = "parallel"))]
+        let groups = self.groups.iter().map(weigh).collect();
+        PlaneMomentsProblem::new(groups)
+    }
+
+    fn cost(&self, pose: &Isometry3<f64>) -> f64 {
+        // Indices were checked against their clouds in `new`.
+        self.groups
+            .iter()
+            .map(|&(plane, frame, cloud, indices)| {
+                plane_cost(&plane, frame, indices, |&i| cloud[i], pose, self.loss).cost
+            })
+            .sum()
+    }
 }
 
 /// The inlier indices of three planes.
@@ -84,9 +183,12 @@ pub(super) fn matched_inliers(
     Ok((inliers_ref, inliers_tgt))
 }
 
-/// The points of `points` at the indices `idx`.
-pub(super) fn select(points: &[Point3<f64>], idx: &[usize]) -> Vec<Point3<f64>> {
-    idx.iter().filter_map(|&i| points.get(i).copied()).collect()
+/// The points of `points` at the indices `idx`, in place.
+pub(super) fn select<'a>(
+    points: &'a [Point3<f64>],
+    idx: &'a [usize],
+) -> impl Iterator<Item = &'a Point3<f64>> + 'a {
+    idx.iter().filter_map(|&i| points.get(i))
 }
 
 /// The matched planes and their inliers: the target's inliers on each reference plane and the
@@ -114,12 +216,12 @@ pub(super) fn moments_problem(pairs: &PlanePairs<'_>) -> Result<PlaneMomentsProb
     for i in 0..3 {
         moment_groups.push(PlaneMomentGroup {
             plane: planes_ref[i],
-            moments: Moments::from_points(&select(target, &inliers_tgt[i])),
+            moments: Moments::from_points(select(target, &inliers_tgt[i])),
             frame: Frame::Target,
         });
         moment_groups.push(PlaneMomentGroup {
             plane: planes_tgt[i],
-            moments: Moments::from_points(&select(reference, &inliers_ref[i])),
+            moments: Moments::from_points(select(reference, &inliers_ref[i])),
             frame: Frame::Reference,
         });
     }
@@ -136,14 +238,6 @@ pub(super) fn refine(
     options: &PlanarOptions,
     deadline: &Deadline,
 ) -> Result<(Isometry3<f64>, Option<LmReport>)> {
-    let PlanePairs {
-        reference,
-        target,
-        planes_ref,
-        planes_tgt,
-        inliers_ref,
-        inliers_tgt,
-    } = *pairs;
     let initial = *initial;
     let loss = options.loss.unwrap_or(Loss::Cauchy {
         scale: DEFAULT_CAUCHY_SCALE * thresholds[0].max(thresholds[1]),
@@ -154,27 +248,12 @@ pub(super) fn refine(
         let least_squares = solve(moments_problem, &initial, &options.lm)?;
         let solution = match loss {
             Loss::Squared => least_squares,
-            loss => {
-                let mut groups = Vec::with_capacity(6);
-                for i in 0..3 {
-                    groups.push(PlaneGroup {
-                        plane: planes_ref[i],
-                        points: select(target, &inliers_tgt[i]),
-                        frame: Frame::Target,
-                    });
-                    groups.push(PlaneGroup {
-                        plane: planes_tgt[i],
-                        points: select(reference, &inliers_ref[i]),
-                        frame: Frame::Reference,
-                    });
-                }
-                irls(
-                    &PointToPlane::new(groups, loss)?,
-                    &least_squares,
-                    &options.lm,
-                    deadline,
-                )?
-            }
+            loss => irls(
+                &InlierPlanes::new(pairs, loss)?,
+                &least_squares,
+                &options.lm,
+                deadline,
+            )?,
         };
         (solution.pose, Some(solution.report))
     } else {
