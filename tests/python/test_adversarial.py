@@ -105,9 +105,12 @@ def test_no_wrong_answer(family: str, seed: int) -> None:
 #: 5 cm low and 0.1-0.7 deg tilted until the scene settled it; held-out corner 1017, returned 27 cm
 #: low (box tops taken for the ground) until a re-alignment into free space stopped counting;
 #: repeated 63 (two identical boxes), refused as ambiguous over a slide 0.3 m off that the check's
-#: re-alignment carries back onto the best pose.
+#: re-alignment carries back onto the best pose; corner 98, refused as ambiguous over a slide
+#: 0.44 m off that the check passes but that puts 8.6 % of the points into free space (the best
+#: pose none).
 MUST_SOLVE = [
     ("repeated", 63, "targetless"),
+    ("corner", 98, "targetless"),
     ("corner", 1017, "targetless"),
     ("corner", 36, "targetless"),
     ("corner", 46, "targetless"),

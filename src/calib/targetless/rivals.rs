@@ -141,8 +141,9 @@ impl<'a> Contest<'a> {
             return Ok(false);
         }
         let c = self.checks.pair()?.check(&r.pose)?;
-        if pose_error(&r.pose, &self.best.pose).0 < RULED_OUT_TURN {
-            return Ok(self.rules_out_slide(&c));
+        let turn = pose_error(&r.pose, &self.best.pose).0;
+        if turn < RULED_OUT_TURN {
+            return self.rules_out_slide(&c, turn);
         }
         let options = self.checks.options;
         Ok(match c.verdict {
@@ -155,25 +156,40 @@ impl<'a> Contest<'a> {
         })
     }
 
-    /// A slide of the best pose (its check `c`) is no rival when the check finds it inconsistent
-    /// and its re-alignment carries it back onto the best pose: the same optimum, not settled (a
-    /// slide 0.3 m from the best pose in a scene of two identical boxes 3.7 m apart, in the
-    /// adversarial suite). Any other slide counts, whatever the free space says: a corridor
-    /// turned upside down, the best pose of one held-out scene, had only its own slides along the
-    /// corridor as rivals (unverifiable, 7 % of the points in free space against none), and they
-    /// were the only sign; on the real RS-16 corner a slide 3.8 deg and 0.35 m from the best
-    /// pose that the check calls consistent, though it puts more points into free space, is the
-    /// only sign that the best pose, 4.5 deg off, is wrong.
-    fn rules_out_slide(&self, c: &CheckReport) -> bool {
-        match c.verdict {
+    /// A slide of the best pose (its check `c`, turned `turn` from it) is no rival when the check
+    /// finds it inconsistent and its re-alignment carries it back onto the best pose: the same
+    /// optimum, not settled (a slide 0.3 m from the best pose in a scene of two identical boxes
+    /// 3.7 m apart, in the adversarial suite). Nor is a slide that only translates the best pose
+    /// (turned less than [`DISTINCT_ANGLE`]) and that the check passes, when the best pose keeps
+    /// the free space [`clearer`]: the two differ along a direction the surfaces hardly hold,
+    /// and along it the free space is the evidence (16-beam corners whose ground was barely seen,
+    /// where a slide 0.4-0.6 m up or down put 9-11 % of the points into the other sensor's free
+    /// space and the best pose, 1-2 cm from the truth, none). It is the converse of
+    /// [`slid_rival`], where a slide that keeps the free space clearer than the best pose is a
+    /// rival. Any other slide counts: a corridor turned upside down, the best pose of one
+    /// held-out scene, had only its own slides along the corridor as rivals (unverifiable, 7 % of
+    /// the points in free space against none), and they were the only sign; on the real RS-16
+    /// corner a slide turned 3.8 deg and 0.35 m from the best pose that the check calls
+    /// consistent, though it puts more points into free space, is the only sign that the best
+    /// pose, 4.5 deg off, is wrong.
+    fn rules_out_slide(&self, c: &CheckReport, turn: f64) -> Result<bool> {
+        Ok(match c.verdict {
             Verdict::Inconsistent => same_pose(
                 &c.aligned,
                 &self.best.pose,
                 DISTINCT_ANGLE,
                 DISTINCT_DISTANCE,
             ),
-            Verdict::Consistent | Verdict::Unverifiable => false,
-        }
+            Verdict::Consistent => turn < DISTINCT_ANGLE && self.best_clearer(c)?,
+            Verdict::Unverifiable => false,
+        })
+    }
+
+    /// Whether the best pose, passing the check, keeps the free space [`clearer`] than the pose
+    /// whose check is `c`.
+    fn best_clearer(&self, c: &CheckReport) -> Result<bool> {
+        let free = c.violations.max(c.reverse_violations);
+        Ok(self.best_free()?.is_some_and(|f| clearer(f, free)))
     }
 
     /// Whether `r` ties with the best pose and is not ruled out.
