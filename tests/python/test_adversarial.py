@@ -213,3 +213,16 @@ def test_colonnade_one_column_off_is_refused_as_repeated_structure() -> None:
         lidarcal.calibrate(scene.reference, scene.target, method="targetless")
     assert refused.value.kind == "ambiguous"
     assert "may repeat itself" in str(refused.value)
+
+
+def test_auto_refuses_a_corner_result_the_ambiguous_targetless_pose_outfits() -> None:
+    # A room (a fresh seed, first measured in the eighth round): the corner method matched three
+    # planes to their mirror images and returns the room turned 180 degrees, 8 m off, which the
+    # check passes (31 % overlap, 4 % of the points in free space). The targetless method is
+    # refused as ambiguous, but its best pose fits 94 % with no point in free space: auto now
+    # refuses rather than return the corner result (the corner method alone still returns it).
+    scene = scenarios.make("corridor", 2012)
+    with pytest.raises(lidarcal.CalibrationError) as refused:
+        lidarcal.calibrate(scene.reference, scene.target, method="auto")
+    assert refused.value.kind == "inconsistent_methods"
+    assert "found the scene ambiguous" in str(refused.value)
