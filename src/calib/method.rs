@@ -271,27 +271,13 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     } else {
         None
     };
-    if results.len() == 1 {
-        let only = results.remove(0);
-        if let Some(w) = &witness {
-            contradicted_by(&only, w, options)?;
-        }
-        return Ok(only);
-    }
     // Every result passed its method's check. Rank them by the certificate (the noise scale of
     // the agreement comes from the clouds alone, so the reports compare directly).
-    let reports: Vec<&CheckReport> = results.iter().map(|c| &c.check).collect();
-    let scores: Vec<f64> = reports.iter().map(|r| certificate_score(r)).collect();
-    // Whether results `i` and `j` differ by more than either check can detect.
-    let disagree = |i: usize, j: usize| {
-        let (angle, distance) = pose_error(
-            &results[i].reference_from_target,
-            &results[j].reference_from_target,
-        );
-        let (a, b) = (reports[i], reports[j]);
-        angle > a.detectable_rotation.max(b.detectable_rotation)
-            || distance > a.detectable_translation.max(b.detectable_translation)
-    };
+    let scores: Vec<f64> = results
+        .iter()
+        .map(|c| certificate_score(&c.check))
+        .collect();
+    let disagree = |i: usize, j: usize| Separation::new(&results[i], &results[j]).disagree();
     // The earliest method (the one made for the scene) whose score ties the best, or whose pose
     // is the best's within what the checks detect: a targetless pose 1 cm from the corner
     // method's exact one can score 0.01 higher on the same corner.
@@ -302,16 +288,8 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
         .find(|&i| scores[i] >= scores[top] - options.auto_tie || !disagree(i, top))
         .unwrap_or(top);
     for (i, other) in results.iter().enumerate() {
-        let (chosen, rival) = (reports[pick], reports[i]);
-        let (angle, distance) = pose_error(
-            &results[pick].reference_from_target,
-            &other.reference_from_target,
-        );
-        let rotation_tolerance = chosen.detectable_rotation.max(rival.detectable_rotation);
-        let translation_tolerance = chosen
-            .detectable_translation
-            .max(rival.detectable_translation);
-        if disagree(pick, i) && scores[pick] - scores[i] < options.auto_margin {
+        let apart = Separation::new(&results[pick], other);
+        if apart.disagree() && scores[pick] - scores[i] < options.auto_margin {
             return Err(Error::calibration(
                 FailureKind::InconsistentMethods,
                 format!(
@@ -321,10 +299,10 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
                      {}): the scene fits two poses; calibrate with one method, or add structure",
                     results[pick].method().name(),
                     other.method().name(),
-                    angle.to_degrees(),
-                    distance * 100.0,
-                    rotation_tolerance.to_degrees(),
-                    translation_tolerance * 100.0,
+                    apart.angle.to_degrees(),
+                    apart.distance * 100.0,
+                    apart.rotation_tolerance.to_degrees(),
+                    apart.translation_tolerance * 100.0,
                     scores[pick],
                     scores[i],
                     options.auto_margin
@@ -377,15 +355,10 @@ fn contradicted_by(
     if chosen.method() != Method::Planes {
         return Ok(());
     }
-    let (a, b) = (&chosen.check, &witness.check);
-    let (angle, distance) = pose_error(
-        &chosen.reference_from_target,
-        &witness.reference_from_target,
-    );
-    let disagree = angle > a.detectable_rotation.max(b.detectable_rotation)
-        || distance > a.detectable_translation.max(b.detectable_translation);
-    let (score, witness_score) = (certificate_score(a), certificate_score(b));
-    if !disagree || witness_score - score < options.auto_margin {
+    let apart = Separation::new(chosen, witness);
+    let score = certificate_score(&chosen.check);
+    let witness_score = certificate_score(&witness.check);
+    if !apart.disagree() || witness_score - score < options.auto_margin {
         return Ok(());
     }
     Err(Error::calibration(
@@ -396,11 +369,41 @@ fn contradicted_by(
              lead of at least {}) though that method found the scene ambiguous: the scene fits \
              more than one pose; add structure that breaks its symmetry",
             chosen.method().name(),
-            angle.to_degrees(),
-            distance * 100.0,
+            apart.angle.to_degrees(),
+            apart.distance * 100.0,
             options.auto_margin
         ),
     ))
+}
+
+/// How far apart two certified results are, against the smallest errors their checks detect.
+struct Separation {
+    /// Radians.
+    angle: f64,
+    /// Metres.
+    distance: f64,
+    /// The larger of the two checks' detectable rotations (radians).
+    rotation_tolerance: f64,
+    /// The larger of the two checks' detectable translations (metres).
+    translation_tolerance: f64,
+}
+
+impl Separation {
+    fn new(a: &Calibration, b: &Calibration) -> Self {
+        let (angle, distance) = pose_error(&a.reference_from_target, &b.reference_from_target);
+        let (a, b) = (&a.check, &b.check);
+        Separation {
+            angle,
+            distance,
+            rotation_tolerance: a.detectable_rotation.max(b.detectable_rotation),
+            translation_tolerance: a.detectable_translation.max(b.detectable_translation),
+        }
+    }
+
+    /// Whether the two differ by more than either check can detect.
+    fn disagree(&self) -> bool {
+        self.angle > self.rotation_tolerance || self.distance > self.translation_tolerance
+    }
 }
 
 /// How well a certified pose fits: the smaller of the two agreements (points within `3 sigma` of

@@ -205,24 +205,26 @@ def test_families_list_methods_they_can_use() -> None:
     assert scenarios.make("partial", 0).solvable is None
 
 
-def test_colonnade_one_column_off_is_refused_as_repeated_structure() -> None:
-    # The best-ranked pose is one column (3.9 m) off and passes the local check; its slide to the
-    # next peak along the colonnade is the truth, which keeps free space clearer.
-    scene = scenarios.make("repeated", 182)
-    with pytest.raises(lidarcal.CalibrationError) as refused:
-        lidarcal.calibrate(scene.reference, scene.target, method="targetless")
-    assert refused.value.kind == "ambiguous"
-    assert "may repeat itself" in str(refused.value)
+#: Scenes refused with a kind and a phrase of the reason: repeated 182, a colonnade whose
+#: best-ranked pose is one column (3.9 m) off and passes the local check, while its slide to the
+#: next peak along the colonnade is the truth, which keeps free space clearer; corridor 2012 (a
+#: fresh seed, first measured in the eighth round), a room where the corner method matched three
+#: planes to their mirror images and returns the room turned 180 degrees, 8 m off, which the
+#: check passes (31 % overlap, 4 % of the points in free space), while the targetless method is
+#: refused as ambiguous but its best pose fits 94 % with no point in free space: auto refuses
+#: rather than return the corner result (the corner method alone still returns it).
+REFUSED = [
+    ("repeated", 182, "targetless", "ambiguous", "may repeat itself"),
+    ("corridor", 2012, "auto", "inconsistent_methods", "found the scene ambiguous"),
+]
 
 
-def test_auto_refuses_a_corner_result_the_ambiguous_targetless_pose_outfits() -> None:
-    # A room (a fresh seed, first measured in the eighth round): the corner method matched three
-    # planes to their mirror images and returns the room turned 180 degrees, 8 m off, which the
-    # check passes (31 % overlap, 4 % of the points in free space). The targetless method is
-    # refused as ambiguous, but its best pose fits 94 % with no point in free space: auto now
-    # refuses rather than return the corner result (the corner method alone still returns it).
-    scene = scenarios.make("corridor", 2012)
+@pytest.mark.parametrize(("family", "seed", "method", "kind", "phrase"), REFUSED)
+def test_refused_with_its_reason(
+    family: str, seed: int, method: str, kind: str, phrase: str
+) -> None:
+    scene = scenarios.make(family, seed)
     with pytest.raises(lidarcal.CalibrationError) as refused:
-        lidarcal.calibrate(scene.reference, scene.target, method="auto")
-    assert refused.value.kind == "inconsistent_methods"
-    assert "found the scene ambiguous" in str(refused.value)
+        lidarcal.calibrate(scene.reference, scene.target, method=method)
+    assert refused.value.kind == kind
+    assert phrase in str(refused.value)

@@ -220,11 +220,18 @@ impl<'a> Contest<'a> {
     /// points) does not choose between them: a held-out room turned 180 degrees scored 0.552
     /// against the truth's 0.339 (60 % against 36 % overlap), with 94 % / 98 % agreement and no
     /// point in free space for both.
+    ///
+    /// A `v` that [`ties`](Self::ties) is a rival or ruled out, never a twin: ruled out, it is
+    /// either turned less than [`RULED_OUT_TURN`] or fails the check, which [`Contest::rival`]
+    /// has already run on it.
     fn twin(&self, v: &Verified) -> Result<bool> {
         let Some(best) = self.best_check()? else {
             return Ok(false);
         };
-        if !self.within(v) || pose_error(&v.pose, &self.best.pose).0 < RULED_OUT_TURN {
+        if self.ties(v)
+            || !self.within(v)
+            || pose_error(&v.pose, &self.best.pose).0 < RULED_OUT_TURN
+        {
             return Ok(false);
         }
         let c = self.checks.pair()?.check(&v.pose)?;
