@@ -9,6 +9,12 @@ use super::{
     CheckOptions, PreparedPair, MAX_NORMAL_ANGLE, REALIGN_FREE_SPACE_MARGIN, REALIGN_START,
     REALIGN_STEP_TOLERANCE,
 };
+
+/// A re-alignment that moved the pose this far or more (metres, half its starting gate) may have
+/// been stopped by its gate rather than by the scene, and is run again from where it ended ...
+const REALIGN_WALK: f64 = 0.5 * REALIGN_START;
+/// ... up to this many runs in all.
+const MAX_REALIGN_ROUNDS: usize = 6;
 use crate::error::{Error, Result};
 use crate::geometry::{rotation_angle, se3_log};
 use crate::icp::{point_to_plane_icp_with_normals, weakest_direction, IcpOptions, IcpResult};
@@ -48,7 +54,9 @@ pub(super) struct Counted {
 }
 
 impl PreparedPair {
-    /// Point-to-plane ICP from `t`. Too few correspondences is a finding (unverifiable, `None`);
+    /// Point-to-plane ICP from `t`, run again from where it ended while a run moves the pose by
+    /// [`REALIGN_WALK`] or more (at most [`MAX_REALIGN_ROUNDS`] runs). Too few correspondences on
+    /// the first run is a finding (unverifiable, `None`); on a later run the previous run stands;
     /// anything else is an error.
     pub(super) fn realign(&self, t: &Isometry3<f64>) -> Result<Option<IcpResult>> {
         let (r, g, options, noise) = (&self.reference, &self.target, &self.options, self.noise);
@@ -65,17 +73,38 @@ impl PreparedPair {
             step_tolerance: REALIGN_STEP_TOLERANCE,
             ..IcpOptions::default()
         };
-        match point_to_plane_icp_with_normals(
-            &r.surface,
-            &g.surface,
-            t,
-            &icp_options,
-            MAX_NORMAL_ANGLE,
-        ) {
-            Ok(result) => Ok(Some(result)),
-            Err(Error::Calibration { .. }) => Ok(None),
-            Err(e) => Err(e),
+        let icp = |from: &Isometry3<f64>| {
+            point_to_plane_icp_with_normals(
+                &r.surface,
+                &g.surface,
+                from,
+                &icp_options,
+                MAX_NORMAL_ANGLE,
+            )
+        };
+        let mut result = match icp(t) {
+            Ok(result) => result,
+            Err(Error::Calibration { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        // The gate starts at 30 cm and shrinks, so one run moves a pose that far off along a
+        // weakly held direction by 20-35 cm and stops: a street pose 1.03 m off along the
+        // road (adversarial partial 3057) was moved 33 cm, under the weak tolerance, and passed.
+        // A run that moved the pose by half its starting gate or more is run again from where it
+        // ended, until a run moves less.
+        let mut from = *t;
+        for _ in 1..MAX_REALIGN_ROUNDS {
+            if (result.pose.translation.vector - from.translation.vector).norm() < REALIGN_WALK {
+                break;
+            }
+            from = result.pose;
+            match icp(&from) {
+                Ok(next) => result = next,
+                Err(Error::Calibration { .. }) => break,
+                Err(e) => return Err(e),
+            }
         }
+        Ok(Some(result))
     }
 
     /// The correction and the agreement gain as they count: a re-alignment that puts clearly more
