@@ -46,8 +46,10 @@
 //!    10 degrees from the best whose overlap leaves a direction unconstrained (a half turn whose
 //!    agreement comes from sliding along a wall) or that puts more points into free space than
 //!    the check allows is no rival, and the next close contender is examined instead. A rival
-//!    the check refuses only because its local re-alignment moves it (a pose not settled) still
-//!    counts, and so does a slide of the best pose itself.
+//!    the check refuses only because its local re-alignment moves it (a pose not settled) is
+//!    judged again where the re-alignment takes it, and counts unless it fails there outright or
+//!    is unverifiable there and fits worse than the best pose; a slide of the best pose itself
+//!    counts too (see `rivals` for the exceptions).
 //!    **Symmetry probes**: the hypotheses never enumerate a scene's symmetries on purpose, and
 //!    when the two sensors' fields of view differ the truth can rank below its own mirror image
 //!    and never be verified (a corridor or a room is the same box turned half a turn about its
@@ -56,7 +58,12 @@
 //!    the reference centroid and through its middle along the normals (a room's own centre); each
 //!    turn is settled by ICP and scored, and one that comes within
 //!    75 % of the best (and is not ruled out by the check) makes the result
-//!    ambiguous.
+//!    ambiguous; so does one the check cannot tell from the best pose whatever it scores (a
+//!    twin: consistent, agreeing within 2 points both ways, at most 2 points more of the points
+//!    in free space). The best pose slid along its plane pair's free direction to the other peaks
+//!    of the slide score is probed the same way when it puts over 1 % of the points into free
+//!    space: a slide that keeps the free space clearly clearer, or that the check cannot tell
+//!    from the best pose, makes it ambiguous (a colonnade or a row of boxes one period off).
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the
@@ -224,7 +231,7 @@ pub fn calibrate_targetless(
     let top = choice.top;
     // Refused after the observability check below, whose reason is the more fundamental one
     // (a corridor is ambiguous along its axis because nothing constrains that direction).
-    let ambiguity = (choice.rivalry.ambiguous && options.refuse_ambiguous)
+    let ambiguity = (choice.rivalry.ambiguous() && options.refuse_ambiguous)
         .then(|| ambiguity_message(&top, &choice.rivalry, options.max_translation));
     clock.lap("verify");
 
@@ -363,7 +370,7 @@ fn details(
         second_score: choice.rivalry.runner_up.map_or(0.0, |r| r.score.max(0.0)),
         agreement: top.agreement,
         violations: top.violations,
-        ambiguous: choice.rivalry.ambiguous,
+        ambiguous: choice.rivalry.ambiguous(),
         icp,
         weakest_translation: observed.weakest_translation,
         weakest_rotation: observed.weakest_rotation,
