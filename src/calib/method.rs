@@ -266,11 +266,6 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     if results.is_empty() {
         return Err(no_method_error(&reasons));
     }
-    let witness = if targetless_ambiguous {
-        ambiguous_witness(reference, target, options)?
-    } else {
-        None
-    };
     // Every result passed its method's check. Rank them by the certificate (the noise scale of
     // the agreement comes from the clouds alone, so the reports compare directly).
     let scores: Vec<f64> = results
@@ -311,8 +306,12 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
         }
     }
     let chosen = results.swap_remove(pick);
-    if let Some(w) = &witness {
-        contradicted_by(&chosen, w, options)?;
+    // Only a corner-method result is judged by the witness (see `contradicted_by`), so the
+    // targetless method runs again only then.
+    if targetless_ambiguous && chosen.method() == Method::Planes {
+        if let Some(witness) = ambiguous_witness(reference, target, options)? {
+            contradicted_by(&chosen, &witness, options)?;
+        }
     }
     Ok(chosen)
 }
@@ -339,8 +338,8 @@ fn ambiguous_witness(
     }
 }
 
-/// `Err(InconsistentMethods)` when `chosen` is the corner method's, the `witness` pose (see
-/// [`ambiguous_witness`]) differs from it beyond what their checks detect, and the witness's
+/// `Err(InconsistentMethods)` when the `witness` pose (see [`ambiguous_witness`]) differs from
+/// `chosen`, the corner method's result, beyond what their checks detect, and the witness's
 /// certificate is ahead by [`MethodOptions::auto_margin`] or more. The witness is itself
 /// doubtful, so only a clear lead counts (on corner 146 of the adversarial suite a witness
 /// 20 cm off led the exact corner result by 0.075), and only against the corner method, which
@@ -352,9 +351,6 @@ fn contradicted_by(
     witness: &Calibration,
     options: &MethodOptions,
 ) -> Result<()> {
-    if chosen.method() != Method::Planes {
-        return Ok(());
-    }
     let apart = Separation::new(chosen, witness);
     let score = certificate_score(&chosen.check);
     let witness_score = certificate_score(&witness.check);

@@ -9,15 +9,16 @@ use super::{
     CheckOptions, PreparedPair, MAX_NORMAL_ANGLE, REALIGN_FREE_SPACE_MARGIN, REALIGN_START,
     REALIGN_STEP_TOLERANCE,
 };
-
-/// A re-alignment that moved the pose this far or more (metres, half its starting gate) may have
-/// been stopped by its gate rather than by the scene, and is run again from where it ended ...
-const REALIGN_WALK: f64 = 0.5 * REALIGN_START;
-/// ... up to this many runs in all.
-const MAX_REALIGN_ROUNDS: usize = 6;
 use crate::error::{Error, Result};
 use crate::geometry::{rotation_angle, se3_log};
 use crate::icp::{point_to_plane_icp_with_normals, weakest_direction, IcpOptions, IcpResult};
+
+/// A re-alignment that moved the pose this far or more (metres: half the 30 cm its gate starts
+/// from at the least) may have been stopped by its gate rather than by the scene, and is run
+/// again from where it ended ...
+const REALIGN_WALK: f64 = 0.5 * REALIGN_START;
+/// ... up to this many runs in all.
+const MAX_REALIGN_ROUNDS: usize = 6;
 
 /// The correction a local re-alignment applies, and the observability of its alignment.
 pub(super) struct Correction {
