@@ -72,7 +72,7 @@ impl<'a> Grid<'a> {
     fn key_of(p: &Point3<f64>, cell: f64) -> Result<[i64; 3]> {
         let mut key = [0i64; 3];
         for (k, c) in key.iter_mut().zip(p.coords.iter()) {
-            let f = (c / cell).floor();
+            let f = crate::geometry::floor(c / cell);
             if f.abs() > MAX_CELL_INDEX {
                 return Err(Error::InvalidInput(format!(
                     "coordinate {c} is too large for a grid of cell size {cell}"

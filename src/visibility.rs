@@ -50,6 +50,10 @@ pub struct RangeImage {
     resolution: f64,
     columns: usize,
     rows: usize,
+    /// The first row stored: only the band of rows the scan reaches is (a spinning unit's
+    /// 30-40 degrees of elevation, a fifth of the sphere), the others hold no return.
+    first_row: usize,
+    /// The nearest range of each bin of the stored rows, row by row (infinite where empty).
     nearest: Vec<f32>,
 }
 
@@ -72,8 +76,25 @@ impl RangeImage {
             resolution,
             columns,
             rows,
-            nearest: vec![f32::INFINITY; columns * rows],
+            first_row: 0,
+            nearest: Vec::new(),
         };
+        // The row is monotone in z / r: the band of rows comes from the extreme ratios, before
+        // any bin is stored.
+        let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+        for p in points {
+            let r = p.coords.norm();
+            if r >= MIN_VISIBILITY_RANGE {
+                low = low.min(p.z / r);
+                high = high.max(p.z / r);
+            }
+        }
+        if low > high {
+            return Ok(image);
+        }
+        let (first, last) = (image.row(low), image.row(high));
+        image.first_row = first;
+        image.nearest = vec![f32::INFINITY; columns * (last - first + 1)];
         for p in points {
             let r = p.coords.norm();
             if r < MIN_VISIBILITY_RANGE {
@@ -86,14 +107,23 @@ impl RangeImage {
         Ok(image)
     }
 
+    /// The row of elevation ratio `z / r`.
+    fn row(&self, ratio: f64) -> usize {
+        let elevation = ratio.clamp(-1.0, 1.0).asin() + std::f64::consts::FRAC_PI_2;
+        ((elevation / self.resolution) as usize).min(self.rows - 1)
+    }
+
+    /// The index in `nearest` of the bin of `p` at range `r`, `None` outside the stored rows.
     fn bin(&self, p: &Point3<f64>, r: f64) -> Option<usize> {
         if r <= 0.0 {
             return None;
         }
+        let row = self.row(p.z / r).checked_sub(self.first_row)?;
+        if row * self.columns >= self.nearest.len() {
+            return None;
+        }
         let azimuth = p.y.atan2(p.x) + std::f64::consts::PI;
-        let elevation = (p.z / r).clamp(-1.0, 1.0).asin() + std::f64::consts::FRAC_PI_2;
         let c = ((azimuth / self.resolution) as usize).min(self.columns - 1);
-        let row = ((elevation / self.resolution) as usize).min(self.rows - 1);
         Some(row * self.columns + c)
     }
 
@@ -164,6 +194,63 @@ mod tests {
         let image = RangeImage::new(&[Point3::new(0.0, 0.0, 10.0)], 0.02).unwrap();
         assert_eq!(image.violation(&Point3::new(0.0, 0.0, 5.0)), Some(true));
         assert_eq!(image.violation(&Point3::new(0.0, 0.0, -5.0)), None);
+    }
+
+    #[test]
+    fn the_stored_band_answers_as_a_whole_sphere_would() {
+        use rand::{RngExt, SeedableRng};
+        // A scan within -15..+10 degrees of elevation, and probes above and below it too.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let direction = |azimuth: f64, elevation: f64, r: f64| {
+            Point3::new(
+                r * elevation.cos() * azimuth.cos(),
+                r * elevation.cos() * azimuth.sin(),
+                r * elevation.sin(),
+            )
+        };
+        let scan: Vec<Point3<f64>> = (0..5000)
+            .map(|_| {
+                let azimuth = rng.random_range(-3.2..3.2);
+                let elevation = rng.random_range(-15f64..10.0).to_radians();
+                direction(azimuth, elevation, rng.random_range(1.0..40.0))
+            })
+            .collect();
+        let resolution = 2f64.to_radians();
+        let image = RangeImage::new(&scan, resolution).unwrap();
+        // The bin of a point over the whole sphere, as the image's docs define it.
+        let bin = |p: &Point3<f64>| {
+            let r = p.coords.norm();
+            let azimuth = p.y.atan2(p.x) + std::f64::consts::PI;
+            let elevation = (p.z / r).clamp(-1.0, 1.0).asin() + std::f64::consts::FRAC_PI_2;
+            (
+                (azimuth / resolution) as usize,
+                (elevation / resolution) as usize,
+            )
+        };
+        let (mut violations, mut neutral, mut behind) = (0, 0, 0);
+        for _ in 0..5000 {
+            let azimuth = rng.random_range(-3.2..3.2);
+            let elevation = rng.random_range(-40f64..40.0).to_radians();
+            let p = direction(azimuth, elevation, rng.random_range(0.5..50.0));
+            let r = p.coords.norm();
+            let near = scan
+                .iter()
+                .filter(|q| q.coords.norm() >= MIN_VISIBILITY_RANGE && bin(q) == bin(&p))
+                .map(|q| q.coords.norm() as f32)
+                .fold(f32::INFINITY, f32::min);
+            let expected = (r >= MIN_VISIBILITY_RANGE && near.is_finite()).then(|| {
+                let near = f64::from(near);
+                r < near - VIOLATION_MARGIN - VIOLATION_RELATIVE_MARGIN * near
+            });
+            assert_eq!(image.violation(&p), expected, "{p:?}");
+            violations += usize::from(expected == Some(true));
+            neutral += usize::from(expected.is_none());
+            behind += usize::from(expected == Some(false));
+        }
+        assert!(
+            violations > 200 && neutral > 500 && behind > 500,
+            "{violations} {neutral} {behind}"
+        );
     }
 
     #[test]

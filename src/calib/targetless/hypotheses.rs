@@ -100,7 +100,7 @@ pub(super) fn solve_translation(
 /// building with many planes gives ~10 000 scored hypotheses and ~7 000 distinct ones).
 pub(super) fn deduplicate(candidates: Vec<Candidate>) -> Vec<Candidate> {
     let cell = |v: &Vector3<f64>| -> [i64; 3] {
-        [0, 1, 2].map(|k| (v[k] / DUPLICATE_DISTANCE).floor() as i64)
+        [0, 1, 2].map(|k| crate::geometry::floor(v[k] / DUPLICATE_DISTANCE) as i64)
     };
     let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     let mut distinct: Vec<Candidate> = Vec::with_capacity(candidates.len());
@@ -344,9 +344,9 @@ impl Occupancy {
     pub(super) fn key(cell: f64, p: &Point3<f64>) -> [i64; 3] {
         // Inputs are bounded by MAX_COORDINATE; beyond i64 a float-to-int cast saturates.
         [
-            (p.x / cell).floor() as i64,
-            (p.y / cell).floor() as i64,
-            (p.z / cell).floor() as i64,
+            crate::geometry::floor(p.x / cell) as i64,
+            crate::geometry::floor(p.y / cell) as i64,
+            crate::geometry::floor(p.z / cell) as i64,
         ]
     }
 

@@ -140,9 +140,9 @@ fn flat_patches(points: &[Point3<f64>], threshold: f64) -> Patches {
         std::collections::HashMap::new();
     for (i, p) in points.iter().enumerate() {
         let key = [
-            (p.x / PATCH_SIZE).floor() as i64,
-            (p.y / PATCH_SIZE).floor() as i64,
-            (p.z / PATCH_SIZE).floor() as i64,
+            crate::geometry::floor(p.x / PATCH_SIZE) as i64,
+            crate::geometry::floor(p.y / PATCH_SIZE) as i64,
+            crate::geometry::floor(p.z / PATCH_SIZE) as i64,
         ];
         cells.entry(key).or_default().push(i);
     }
