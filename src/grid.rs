@@ -39,7 +39,7 @@ pub(crate) struct NeighbourGrid {
 
 /// The cell of coordinate `x` along one axis (saturating far outside any scan).
 fn cell_of(x: f64, inverse: f64) -> i64 {
-    crate::geometry::floor(x * inverse) as i64
+    (x * inverse).floor() as i64
 }
 
 /// The packed key of cell `c`.
@@ -185,60 +185,6 @@ impl NeighbourGrid {
         k: usize,
         distance: f64,
     ) -> Option<Vec<(usize, f64)>> {
-        let rings = ((distance * self.inverse).ceil() as i64).clamp(0, MAX_RINGS);
-        self.nearest_k_in(q, k, distance, rings)
-    }
-
-    /// The `k` nearest points to `q` at any distance, as [`nearest_k`](Self::nearest_k) gives
-    /// them, when they lie closer than `rings` cell sides (every point that close lies in the
-    /// `rings` rings of cells around `q`'s own); `None` otherwise. The sparse parts of a scan,
-    /// where ten neighbours span more than a metre, are served without a k-d tree.
-    pub(crate) fn nearest_k_within_rings(
-        &self,
-        q: &Point3<f64>,
-        k: usize,
-        rings: i64,
-    ) -> Option<Vec<(usize, f64)>> {
-        let reach = rings as f64 * self.cell;
-        let near = self.nearest_k_in(q, k, reach, rings.max(0))?;
-        // Strictly closer: a point outside the rings may lie exactly at the reach.
-        near.last()
-            .is_none_or(|&(_, d2)| d2 < reach * reach)
-            .then_some(near)
-    }
-
-    /// The `k` nearest points to `q` (all of them when fewer), by a scan of every point: for the
-    /// rare query with no `k` neighbours within the rings searched, where building a k-d tree
-    /// would cost more than a few such scans. Ordered as [`nearest_k`](Self::nearest_k).
-    pub(crate) fn nearest_k_by_scan(&self, q: &Point3<f64>, k: usize) -> Vec<(usize, f64)> {
-        let q = [q.x, q.y, q.z];
-        let mut best: Vec<(f64, u32)> = Vec::with_capacity(k + 1);
-        if k > 0 {
-            for (p, &id) in self.sorted.iter().zip(&self.ids) {
-                let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
-                if d2.is_nan() {
-                    continue;
-                }
-                let entry = (d2, id);
-                if best.len() == k && best.last().is_some_and(|last| !less(&entry, last)) {
-                    continue;
-                }
-                let at = best.partition_point(|b| less(b, &entry));
-                best.insert(at, entry);
-                best.truncate(k);
-            }
-        }
-        best.into_iter().map(|(d2, i)| (i as usize, d2)).collect()
-    }
-
-    /// [`nearest_k`](Self::nearest_k) over `rings` rings of cells.
-    fn nearest_k_in(
-        &self,
-        q: &Point3<f64>,
-        k: usize,
-        distance: f64,
-        rings: i64,
-    ) -> Option<Vec<(usize, f64)>> {
         if k == 0 {
             return Some(Vec::new());
         }
@@ -261,6 +207,7 @@ impl NeighbourGrid {
                 _ => (o - 1) as f64 * self.cell + (self.cell - within),
             }
         };
+        let rings = ((distance * self.inverse).ceil() as i64).clamp(0, MAX_RINGS);
         // The best `k` so far, sorted by (squared distance, index); the bound is the k-th's.
         let mut best: Vec<(f64, u32)> = Vec::with_capacity(k + 1);
         let limit = distance * distance;
@@ -427,70 +374,6 @@ mod tests {
         assert!(!grid.reaches(0.51));
         let far = Point3::new(-1e6, 2e6, 5.1);
         assert_eq!(grid.nearest(&far, 0.2).map(|x| x.0), Some(points.len() - 1));
-    }
-
-    #[test]
-    fn nearest_k_within_rings_and_by_scan_are_the_k_nearest_at_any_distance() {
-        let mut rng = ChaCha8Rng::seed_from_u64(11);
-        // Sparse scatter over 40 m, so that ten neighbours often lie metres away.
-        let points: Vec<Point3<f64>> = (0..400)
-            .map(|_| {
-                Point3::new(
-                    rng.random_range(-20.0..20.0),
-                    rng.random_range(-20.0..20.0),
-                    rng.random_range(-2.0..2.0),
-                )
-            })
-            .collect();
-        let grid = NeighbourGrid::new(&points, 1.0);
-        let (mut found, mut refused) = (0, 0);
-        for _ in 0..500 {
-            let q = Point3::new(
-                rng.random_range(-25.0..25.0),
-                rng.random_range(-25.0..25.0),
-                rng.random_range(-3.0..3.0),
-            );
-            for (k, rings) in [(1, 1), (10, 2), (10, 4), (3, 8)] {
-                let mut all: Vec<(usize, f64)> = points
-                    .iter()
-                    .enumerate()
-                    .map(|(i, p)| (i, (p - q).norm_squared()))
-                    .collect();
-                all.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-                let nearest = all[..k].to_vec();
-                match grid.nearest_k_within_rings(&q, k, rings) {
-                    Some(got) => {
-                        assert_eq!(got, nearest, "q {q:?} k {k} rings {rings}");
-                        found += 1;
-                    }
-                    None => {
-                        // Refused only when the k-th lies at the reach or beyond.
-                        let reach = rings as f64;
-                        assert!(nearest[k - 1].1 >= reach * reach, "q {q:?} k {k}");
-                        refused += 1;
-                    }
-                }
-            }
-        }
-        assert!(
-            found > 500 && refused > 100,
-            "{found} found, {refused} refused"
-        );
-        // The scan gives the same, at any distance.
-        for _ in 0..50 {
-            let q = Point3::new(rng.random_range(-60.0..60.0), 0.0, 0.0);
-            let mut all: Vec<(usize, f64)> = points
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (i, (p - q).norm_squared()))
-                .collect();
-            all.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-            assert_eq!(grid.nearest_k_by_scan(&q, 10), all[..10].to_vec());
-        }
-        assert_eq!(
-            grid.nearest_k_by_scan(&Point3::origin(), 1000).len(),
-            points.len()
-        );
     }
 
     #[test]

@@ -4,12 +4,11 @@
 //! * [`voxel_downsample`] replaces the points of each cubic voxel by their centroid (and says
 //!   which voxel every input point fell in), which evens out the density of a spinning LiDAR
 //!   (dense near the sensor, sparse far away) and bounds the work.
-//! * [`SurfaceCloud`] is the reference side of ICP: the points, a hash grid over them
-//!   ([`crate::grid`]; a k-d tree, the [`kiddo`] crate's immutable tree, is built only for
-//!   queries beyond the grid's reach and for isolated points) and a unit normal per point from
-//!   the principal axes of its 10 nearest neighbours. Points whose neighbourhood is not flat
-//!   (foliage, edges: surface variation above 0.08) get no normal and are never used as
-//!   correspondences.
+//! * [`SurfaceCloud`] is the reference side of ICP: the points, a k-d tree over them (the
+//!   [`kiddo`] crate's immutable tree: pure Rust, no threads of its own) and a unit normal per point from the
+//!   principal axes of its 10 nearest neighbours. Points whose neighbourhood is
+//!   not flat (foliage, edges: surface variation above 0.08) get no normal and
+//!   are never used as correspondences.
 //! * [`point_to_plane_icp`] aligns a target cloud to it. Each iteration pairs every sampled target
 //!   point with its nearest reference point within the current correspondence distance, weights
 //!   the point-to-plane residual `n . (T p - q)` with a Cauchy loss at a third of that distance,
@@ -52,7 +51,6 @@
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
@@ -78,15 +76,6 @@ const GRID_CELL: f64 = 1.0;
 /// Radius (metres) of the grid's search for a point's ten neighbours: at the 10 cm voxels of the
 /// check and the verification, they lie within about 20 cm on any surface.
 const NEIGHBOURHOOD_BOUND: f64 = 0.5;
-/// Rings of 1 m grid cells searched for a point's ten neighbours where they lie beyond
-/// [`NEIGHBOURHOOD_BOUND`] (the far, sparse parts of a scan), before the k-d tree is built for
-/// them. In one check of the Hesai P64 against the QT (10 cm voxels), 758 points needed more
-/// than the bound, 31 more than 3 m and one more than 16 m. (Giving those beyond 2 m no normal
-/// instead changed 18 outcomes of the 1000 adversarial scenes and made two wrong.)
-const SPARSE_RINGS: i64 = 3;
-/// Neighbourhoods of a cloud found beyond [`SPARSE_RINGS`] by a scan of every point before the
-/// k-d tree is built: a scan of a 75k-voxel cloud takes about a fiftieth of building the tree.
-const SPARSE_SCANS: usize = 32;
 /// Largest surface variation `l0 / (l0 + l1 + l2)` of a neighbourhood that still counts as a
 /// surface (0 for a perfect plane, 1/3 for isotropic scatter).
 const MAX_SURFACE_VARIATION: f64 = 0.08;
@@ -213,20 +202,16 @@ fn group_by_key<K: std::hash::Hash + Eq>(
 /// 2-4x faster.
 type Tree = ImmutableKdTree<f64, u32, 3, 32>;
 
-/// The reference side of ICP: points, a hash grid (a k-d tree on demand) and per-point normals (see the module docs).
+/// The reference side of ICP: points, a k-d tree and per-point normals (see the module docs).
 ///
 /// Normals are computed lazily, the first time a point is used as a correspondence, and cached:
 /// ICP touches only the part of the reference the target overlaps. A normal is a pure function of
 /// the point's neighbourhood, so the order of first use (thread scheduling) changes nothing.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct SurfaceCloud {
     points: Vec<Point3<f64>>,
     normals: Vec<OnceLock<Option<Vector3<f64>>>>,
-    /// Built the first time a query needs it (a radius beyond the grid's reach, or a point whose
-    /// ten neighbours lie farther than [`SPARSE_RINGS`] cells): dense clouds never do.
-    tree: OnceLock<Tree>,
-    /// Neighbourhoods found by [`NeighbourGrid::nearest_k_by_scan`] so far.
-    scans: AtomicUsize,
+    tree: Tree,
     /// For the bounded nearest-neighbour queries within its reach (most of them).
     grid: NeighbourGrid,
 }
@@ -248,39 +233,31 @@ impl SurfaceCloud {
                 points.len()
             )));
         }
-        let grid = NeighbourGrid::new(&points, GRID_CELL);
+        let coordinates: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let (tree, grid) = crate::join(
+            || Tree::new_from_slice(&coordinates),
+            || NeighbourGrid::new(&points, GRID_CELL),
+        );
         let normals = (0..points.len()).map(|_| OnceLock::new()).collect();
         Ok(SurfaceCloud {
             points,
             normals,
-            tree: OnceLock::new(),
-            scans: AtomicUsize::new(0),
+            tree,
             grid,
-        })
-    }
-
-    /// The k-d tree, built on first use.
-    fn tree(&self) -> &Tree {
-        self.tree.get_or_init(|| {
-            let coordinates: Vec<[f64; 3]> = self.points.iter().map(|p| [p.x, p.y, p.z]).collect();
-            Tree::new_from_slice(&coordinates)
         })
     }
 
     /// The moments of the 10 nearest points of `p`.
     fn neighbourhood(&self, p: &Point3<f64>) -> Moments {
         let mut m = Moments::new(*p);
-        // The grid finds the ten nearest, nearest first, in one ring of cells when they lie
-        // within the bound (on any surface at the check's 10 cm voxels), in a few more where the
-        // scan is sparse; the k-d tree's unbounded search serves the isolated points beyond.
-        let near = self
+        let k = NonZeroUsize::new(NORMAL_NEIGHBOURS).unwrap_or(NonZeroUsize::MIN);
+        // The grid finds the ten nearest, nearest first, when they lie within its bound (on
+        // any surface at the check's 10 cm voxels); the k-d tree's unbounded search, several
+        // times slower, serves sparse clouds.
+        match self
             .grid
             .nearest_k(p, NORMAL_NEIGHBOURS, NEIGHBOURHOOD_BOUND)
-            .or_else(|| {
-                self.grid
-                    .nearest_k_within_rings(p, NORMAL_NEIGHBOURS, SPARSE_RINGS)
-            });
-        match near {
+        {
             Some(near) => {
                 for (i, _) in near {
                     if let Some(q) = self.points.get(i) {
@@ -288,20 +265,9 @@ impl SurfaceCloud {
                     }
                 }
             }
-            // The first few isolated points by a scan of the cloud, the rest by the k-d tree.
-            None if self.scans.fetch_add(1, Ordering::Relaxed) < SPARSE_SCANS => {
-                for (i, _) in self.grid.nearest_k_by_scan(p, NORMAL_NEIGHBOURS) {
-                    if let Some(q) = self.points.get(i) {
-                        m.add(q);
-                    }
-                }
-            }
             None => {
-                let k = NonZeroUsize::new(NORMAL_NEIGHBOURS).unwrap_or(NonZeroUsize::MIN);
-                for n in self
-                    .tree()
-                    .nearest_n::<SquaredEuclidean>(&[p.x, p.y, p.z], k)
-                {
+                let q = [p.x, p.y, p.z];
+                for n in self.tree.nearest_n::<SquaredEuclidean>(&q, k) {
                     if let Some(q) = self.points.get(n.item as usize) {
                         m.add(q);
                     }
@@ -354,7 +320,7 @@ impl SurfaceCloud {
         }
         // A search bounded by the distance: an unbounded nearest-neighbour query from a point far
         // from the cloud (most of a partial overlap) walks much of the tree.
-        self.tree()
+        self.tree
             .nearest_n_within::<SquaredEuclidean>(
                 &[q.x, q.y, q.z],
                 max_distance * max_distance,
