@@ -56,8 +56,8 @@ impl NeighbourGrid {
         // A counting sort: number the cells as they are first met, count their points, and
         // place each point after those of the cells numbered before its own. A cell's points
         // keep their input order, so the grid is a function of the input alone; and there are
-        // a few thousand cells where there are tens of thousands of points, so the map stays
-        // in cache (a comparison sort of the points' keys took 4-5 ms for 75k points).
+        // about a tenth as many cells as points (9.6k for the hesai P64's 75k voxels), so the
+        // map stays in cache. With a comparison sort of the points' keys that grid took 5 ms.
         let mut slots: FxHashMap<u64, u32> = FxHashMap::default();
         let mut counts: Vec<u32> = Vec::new();
         let cell_ids: Vec<u32> = points
