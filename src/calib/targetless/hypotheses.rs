@@ -9,6 +9,7 @@ use super::options::TargetlessOptions;
 use super::segment::PlaneFeature;
 use super::verify::VIOLATION_WEIGHT;
 use crate::calib::input::isometry;
+use crate::geometry::cell_key;
 use crate::kabsch::kabsch;
 use crate::visibility::RangeImage;
 
@@ -99,9 +100,7 @@ pub(super) fn solve_translation(
 /// the same result as comparing with every kept one, without the quadratic cost (a scan of a
 /// building with many planes gives ~10 000 scored hypotheses and ~7 000 distinct ones).
 pub(super) fn deduplicate(candidates: Vec<Candidate>) -> Vec<Candidate> {
-    let cell = |v: &Vector3<f64>| -> [i64; 3] {
-        [0, 1, 2].map(|k| crate::geometry::floor(v[k] / DUPLICATE_DISTANCE) as i64)
-    };
+    let cell = |v: &Vector3<f64>| cell_key(v, DUPLICATE_DISTANCE);
     let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     let mut distinct: Vec<Candidate> = Vec::with_capacity(candidates.len());
     for c in candidates {
@@ -343,11 +342,7 @@ pub(super) struct Occupancy {
 impl Occupancy {
     pub(super) fn key(cell: f64, p: &Point3<f64>) -> [i64; 3] {
         // Inputs are bounded by MAX_COORDINATE; beyond i64 a float-to-int cast saturates.
-        [
-            crate::geometry::floor(p.x / cell) as i64,
-            crate::geometry::floor(p.y / cell) as i64,
-            crate::geometry::floor(p.z / cell) as i64,
-        ]
+        cell_key(&p.coords, cell)
     }
 
     pub(super) fn new(points: &[Point3<f64>], cell: f64) -> Self {

@@ -7,7 +7,7 @@ use super::super::planes::estimate_threshold;
 use super::options::TargetlessOptions;
 use crate::error::{Error, Result};
 use crate::fit::Moments;
-use crate::geometry::Plane;
+use crate::geometry::{cell_key, Plane};
 use crate::icp::voxel_downsample;
 use crate::ransac::plane::ransac_plane;
 use crate::ransac::RansacOptions;
@@ -139,12 +139,10 @@ fn flat_patches(points: &[Point3<f64>], threshold: f64) -> Patches {
     let mut cells: std::collections::HashMap<[i64; 3], Vec<usize>> =
         std::collections::HashMap::new();
     for (i, p) in points.iter().enumerate() {
-        let key = [
-            crate::geometry::floor(p.x / PATCH_SIZE) as i64,
-            crate::geometry::floor(p.y / PATCH_SIZE) as i64,
-            crate::geometry::floor(p.z / PATCH_SIZE) as i64,
-        ];
-        cells.entry(key).or_default().push(i);
+        cells
+            .entry(cell_key(&p.coords, PATCH_SIZE))
+            .or_default()
+            .push(i);
     }
     let mut cell_keys: Vec<[i64; 3]> = cells.keys().copied().collect();
     cell_keys.sort_unstable();
