@@ -22,6 +22,7 @@ pub mod planes;
 pub mod poles;
 pub mod result;
 pub mod rig;
+pub mod sequence;
 pub mod targetless;
 
 pub use method::{calibrate, Cloud, Method, MethodOptions};

@@ -1,0 +1,1 @@
+//! Hand-eye calibration from synchronized motions (`A_k X = X B_k`).
