@@ -34,12 +34,12 @@
 //! # When is a direction unobserved?
 //! With one eigenvalue of `N` at share `s` of its trace, the translation's standard deviation
 //! along it is about `sqrt(1 / (3 s))` times that of an average direction. [`UNOBSERVED_SHARE`]
-//! (`1e-3`) flags a direction known 18 times worse than the others. Planar driving gives a share
-//! of 0; a car's body pitch and roll of about 1 degree on turns of tens of degrees give about
-//! `(1 deg / turn)^2`, of order `1e-4` (the test `near_planar_drive_flags_the_vertical` measures
-//! it): the height difference of the two sensors is then a fraction of the noise amplified
-//! a hundredfold, and odometry's systematic errors make it worse. It is reported, not guessed:
-//! take it from a drawing or a tape measure.
+//! (`1e-2`) flags a direction known about 6 times worse than the others. Planar driving gives a
+//! share of 0; a car's body pitch and roll of about 1 degree gave `1.6e-3` in the test
+//! `near_planar_drive_flags_the_vertical` (14 times worse: with the few centimetres the
+//! horizontal translation is known to, the height would be off by decimetres, and odometry's
+//! systematic errors make it worse). General 3D motion gives shares above `0.05`. A flagged
+//! direction is reported, not guessed: take the height from a drawing or a tape measure.
 //!
 //! ```
 //! use lidarcal::calib::sequence::hand_eye::{hand_eye, HandEyeOptions, MotionPair};
@@ -379,7 +379,7 @@ fn check_pairs(pairs: &[MotionPair]) -> Result<()> {
     Ok(())
 }
 
-/// The weighted median-free robust spread of whitened residual norms: their median over that of
+/// The robust spread of whitened residual norms: their median over that of
 /// pure noise, at least 1 (the sigmas are the floor).
 fn robust_spread(norms: &[f64]) -> f64 {
     let mut sorted = norms.to_vec();
