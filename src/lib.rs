@@ -130,6 +130,7 @@ pub mod icp;
 pub mod kabsch;
 pub mod lm;
 pub mod metrics;
+pub mod odometry;
 pub mod pose_graph;
 pub mod ransac;
 pub mod residuals;
