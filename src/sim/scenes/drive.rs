@@ -24,7 +24,8 @@
 //! `+-STREET_FACADE_DISTANCE`; at each junction the two streets the route does not take run a few
 //! tens of metres to a cross wall; the first and the last street end in a wall. Parked cars
 //! (boxes), tree trunks and poles (cylinders) line the kerbs. `shapes[0]` is the ground
-//! ([`DRIVE_GROUND_SHAPE`]); a default drive has about 90 shapes. Before each scan the shapes
+//! ([`DRIVE_GROUND_SHAPE`]); a default drive has about 70 shapes (seed 0: 72), a 200 s one
+//! about 520. Before each scan the shapes
 //! that cannot be reached (farther than the model's maximum range, or behind a unit whose field
 //! is at most 180 degrees) are culled, which changes no point.
 //!
@@ -34,6 +35,10 @@
 //! is at the front (about 1.8 m forward, 0.6–1.1 m up, looking forward), the target at the rear
 //! (about 2.5 m back, looking backward), each with a few degrees and centimetres of random
 //! mounting error. Both scan at the same instants `k / rate_hz` with no motion distortion.
+//!
+//! Nearly every one of a unit's 64 x 601 beams returns: a default frame holds about 37,500
+//! points from the front unit and 36,000 from the rear one, half of them on the ground, and the
+//! 200 frames take about 11 s on two cores (54 ms a frame for both units, release build).
 //!
 //! # Determinism
 //! The layout, the mounting, the body motion and the scan seeds come from separate streams of one
