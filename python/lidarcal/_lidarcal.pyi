@@ -26,6 +26,7 @@ __all__ = [
     "CalibrationError",
     "CalibrationResult",
     "CheckReport",
+    "DriveScene",
     "FileFormatError",
     "Line",
     "PlanarDetails",
@@ -62,6 +63,7 @@ __all__ = [
     "se3_log",
     "sim_corner_scene",
     "sim_corridor_scene",
+    "sim_drive_scene",
     "sim_paper_scene",
     "sim_pole_axis_trial",
     "sim_poles_scene",
@@ -817,6 +819,28 @@ class Scene:
     @property
     def pole_radii(self) -> _F64Array: ...
 
+@final
+class DriveScene:
+    """A simulated drive: each unit's frames in its own frame and the true poses."""
+
+    @property
+    def reference_frames(self) -> list[_F64Array]: ...
+    @property
+    def target_frames(self) -> list[_F64Array]: ...
+    @property
+    def reference_labels(self) -> list[npt.NDArray[np.int64]]: ...
+    @property
+    def target_labels(self) -> list[npt.NDArray[np.int64]]: ...
+    @property
+    def reference_from_target(self) -> _F64Array: ...
+    @property
+    def world_from_reference(self) -> _F64Array: ...
+    @property
+    def world_from_target(self) -> _F64Array: ...
+    @property
+    def times(self) -> _F64Array: ...
+    def __len__(self) -> int: ...
+
 def sim_scan(
     shapes: Sequence[Shape],
     model: str | BeamModel | None = None,
@@ -862,6 +886,16 @@ def sim_street_scene(
     target_offset: float | None = None,
 ) -> Scene: ...
 def sim_corridor_scene(*, seed: int = 0) -> Scene: ...
+def sim_drive_scene(
+    seed: int = 0,
+    *,
+    frames: int | None = None,
+    rate_hz: float | None = None,
+    body_motion: bool | None = None,
+    ground: bool | None = None,
+    field_of_view_deg: float | None = None,
+    range_noise: float | None = None,
+) -> DriveScene: ...
 def sim_paper_scene(
     *, alpha_deg: float | None = None, configuration: int | None = ..., seed: int = 0
 ) -> Scene: ...

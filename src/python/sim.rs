@@ -1,8 +1,8 @@
 //! Python wrappers of the scan simulator (`lidarcal.sim`) and the PCD writer.
 
 use nalgebra::{Isometry3, Point3};
-use numpy::ndarray::{Array1, Ix1, Ix2};
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::ndarray::{Array1, Ix1, Ix2, Ix3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PySequence};
@@ -12,8 +12,9 @@ use super::defaults::table;
 use super::run;
 use crate::geometry;
 use crate::sim::scenes::{
-    corner_scene, corridor_scene, paper_scene, poles_scene, street_scene, CornerOptions,
-    PaperConfiguration, PaperOptions, PolesOptions, Side, StreetOptions, POLES_RANGE_NOISE,
+    corner_scene, corridor_scene, drive_scene, paper_scene, poles_scene, street_scene,
+    CornerOptions, DriveOptions, PaperConfiguration, PaperOptions, PolesOptions, Side,
+    StreetOptions, POLES_RANGE_NOISE,
 };
 use crate::sim::shapes::{self, IntensityRange};
 use crate::sim::{self as core_sim, BeamSettings, Preset, Scan, ScanOptions};
@@ -589,6 +590,198 @@ fn sim_paper_scene(
     })
 }
 
+/// One frame of a drive as numpy data: the (N, 4) rows and the (N,) shape labels.
+struct FrameRows {
+    rows: Vec<f64>,
+    labels: Vec<i64>,
+}
+
+impl FrameRows {
+    fn new(scan: &Scan) -> FrameRows {
+        let (_, _, rows) = scan_rows(scan, false);
+        let labels = scan
+            .points
+            .iter()
+            .map(|p| p.shape.map_or(-1, |s| i64::try_from(s).unwrap_or(-1)))
+            .collect();
+        FrameRows { rows, labels }
+    }
+}
+
+/// A read-only numpy array (the frames are shared by every access to a DriveScene's lists).
+fn frozen<'py, D: numpy::ndarray::Dimension, T: numpy::Element>(
+    array: Bound<'py, numpy::PyArray<T, D>>,
+) -> PyResult<Py<numpy::PyArray<T, D>>> {
+    let kwargs = PyDict::new(array.py());
+    kwargs.set_item("write", false)?;
+    array.call_method("setflags", (), Some(&kwargs))?;
+    Ok(array.unbind())
+}
+
+/// A simulated drive: each unit's frames in its own frame and the true poses (see
+/// `lidarcal.sim.drive_scene`). The frames are converted once, read-only.
+#[pyclass(frozen, module = "lidarcal", name = "DriveScene")]
+pub(crate) struct DriveScene {
+    reference_frames: Vec<Py<PyArray2<f64>>>,
+    target_frames: Vec<Py<PyArray2<f64>>>,
+    reference_labels: Vec<Py<PyArray1<i64>>>,
+    target_labels: Vec<Py<PyArray1<i64>>>,
+    reference_from_target: Isometry3<f64>,
+    world_from_reference: Vec<Isometry3<f64>>,
+    times: Vec<f64>,
+    shapes: usize,
+    field_of_view_deg: f64,
+    /// Total points of the reference and the target frames.
+    points: (usize, usize),
+}
+
+/// A drive's frames of one unit as numpy arrays: the points and the shape labels.
+type FrameArrays = (Vec<Py<PyArray2<f64>>>, Vec<Py<PyArray1<i64>>>);
+
+fn frame_arrays(py: Python<'_>, frames: Vec<FrameRows>) -> PyResult<FrameArrays> {
+    let mut points = Vec::with_capacity(frames.len());
+    let mut labels = Vec::with_capacity(frames.len());
+    for f in frames {
+        let n = f.labels.len();
+        points.push(frozen(to_numpy(py, Ix2(n, 4), f.rows)?)?);
+        labels.push(frozen(Array1::from_vec(f.labels).into_pyarray(py))?);
+    }
+    Ok((points, labels))
+}
+
+fn poses<'py>(py: Python<'py>, poses: &[Isometry3<f64>]) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let data: Vec<f64> = poses
+        .iter()
+        .flat_map(|p| row_major(&p.to_homogeneous()))
+        .collect();
+    to_numpy(py, Ix3(poses.len(), 4, 4), data)
+}
+
+fn clone_all<T>(py: Python<'_>, items: &[Py<T>]) -> Vec<Py<T>> {
+    items.iter().map(|a| a.clone_ref(py)).collect()
+}
+
+#[pymethods]
+impl DriveScene {
+    /// K read-only (N_k, 4) arrays [x, y, z, intensity]: the reference (front) unit's frames, each
+    /// in its own frame.
+    #[getter]
+    fn reference_frames(&self, py: Python<'_>) -> Vec<Py<PyArray2<f64>>> {
+        clone_all(py, &self.reference_frames)
+    }
+    /// K read-only (M_k, 4) arrays: the target (rear) unit's frames, each in its own frame.
+    #[getter]
+    fn target_frames(&self, py: Python<'_>) -> Vec<Py<PyArray2<f64>>> {
+        clone_all(py, &self.target_frames)
+    }
+    /// K read-only (N_k,) arrays: the index of the shape each reference point hit (0: the ground).
+    #[getter]
+    fn reference_labels(&self, py: Python<'_>) -> Vec<Py<PyArray1<i64>>> {
+        clone_all(py, &self.reference_labels)
+    }
+    /// K read-only (M_k,) arrays: the index of the shape each target point hit (0: the ground).
+    #[getter]
+    fn target_labels(&self, py: Python<'_>) -> Vec<Py<PyArray1<i64>>> {
+        clone_all(py, &self.target_labels)
+    }
+    /// (4, 4) true reference_from_target.
+    #[getter]
+    fn reference_from_target<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        matrix(py, &self.reference_from_target)
+    }
+    /// (K, 4, 4) true pose of the reference unit in the world at each frame.
+    #[getter]
+    fn world_from_reference<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        poses(py, &self.world_from_reference)
+    }
+    /// (K, 4, 4) true pose of the target unit in the world at each frame.
+    #[getter]
+    fn world_from_target<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let t: Vec<Isometry3<f64>> = self
+            .world_from_reference
+            .iter()
+            .map(|w| w * self.reference_from_target)
+            .collect();
+        poses(py, &t)
+    }
+    /// (K,) time of each frame, seconds.
+    #[getter]
+    fn times<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        to_numpy(py, Ix1(self.times.len()), self.times.clone())
+    }
+    fn __len__(&self) -> usize {
+        self.times.len()
+    }
+    fn __repr__(&self) -> String {
+        let k = self.times.len();
+        let (r, t) = self.points;
+        let per_frame = |n: usize| n / k.max(1);
+        format!(
+            "DriveScene(frames={k}, duration={:.1} s, field_of_view_deg={}, reference={r} points \
+             (~{}/frame), target={t} points (~{}/frame), shapes={})",
+            self.times.last().copied().unwrap_or(0.0),
+            self.field_of_view_deg,
+            per_frame(r),
+            per_frame(t),
+            self.shapes
+        )
+    }
+}
+
+/// A drive through a town by a vehicle with a forward-looking unit at its front (the reference)
+/// and a backward-looking one at its rear (the target); keywords as `lidarcal.sim.drive_scene`.
+// One argument per keyword of `lidarcal.sim.drive_scene`.
+#[allow(clippy::too_many_arguments)]
+#[pyfunction]
+#[pyo3(signature = (seed=0, *, frames=None, rate_hz=None, body_motion=None, ground=None, field_of_view_deg=None, range_noise=None))]
+fn sim_drive_scene(
+    py: Python<'_>,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
+    frames: Option<usize>,
+    rate_hz: Option<f64>,
+    body_motion: Option<bool>,
+    ground: Option<bool>,
+    field_of_view_deg: Option<f64>,
+    range_noise: Option<f64>,
+) -> PyResult<DriveScene> {
+    let d = DriveOptions::default();
+    let options = DriveOptions {
+        seed,
+        frames: frames.unwrap_or(d.frames),
+        rate_hz: rate_hz.unwrap_or(d.rate_hz),
+        speed: d.speed,
+        body_motion: body_motion.unwrap_or(d.body_motion),
+        ground: ground.unwrap_or(d.ground),
+        field_of_view_deg: field_of_view_deg.unwrap_or(d.field_of_view_deg),
+        range_noise: range_noise.or(d.range_noise),
+    };
+    // Scan and lay the frames out as rows without the GIL; only the numpy wrapping needs it.
+    let (drive, reference, target) = run(py, move || {
+        let mut drive = drive_scene(&options)?;
+        let reference: Vec<FrameRows> = drive.reference_frames.iter().map(FrameRows::new).collect();
+        drive.reference_frames = Vec::new();
+        let target: Vec<FrameRows> = drive.target_frames.iter().map(FrameRows::new).collect();
+        drive.target_frames = Vec::new();
+        Ok((drive, reference, target))
+    })?;
+    let total = |frames: &[FrameRows]| frames.iter().map(|f| f.labels.len()).sum();
+    let points = (total(&reference), total(&target));
+    let (reference_frames, reference_labels) = frame_arrays(py, reference)?;
+    let (target_frames, target_labels) = frame_arrays(py, target)?;
+    Ok(DriveScene {
+        reference_frames,
+        target_frames,
+        reference_labels,
+        target_labels,
+        reference_from_target: drive.reference_from_target,
+        world_from_reference: drive.world_from_reference,
+        times: drive.times,
+        shapes: drive.shapes.len(),
+        field_of_view_deg: options.field_of_view_deg,
+        points,
+    })
+}
+
 /// Writes (N, 4) [x, y, z, intensity] or (N, 5) [..., ring] points as a PCD v0.7 file.
 #[pyfunction]
 #[pyo3(signature = (path, points, *, ascii=false))]
@@ -723,12 +916,14 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BeamModel>()?;
     m.add_class::<Shape>()?;
     m.add_class::<Scene>()?;
+    m.add_class::<DriveScene>()?;
     m.add_function(wrap_pyfunction!(sim_scan, m)?)?;
     m.add_function(wrap_pyfunction!(sim_corner_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_poles_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_street_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_corridor_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_paper_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_drive_scene, m)?)?;
     m.add_function(wrap_pyfunction!(sim_pole_axis_trial, m)?)?;
     m.add_function(wrap_pyfunction!(write_pcd, m)?)?;
     Ok(())

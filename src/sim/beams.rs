@@ -25,6 +25,11 @@ pub const MAX_BEAMS: usize = u16::MAX as usize;
 pub const MAX_COLUMNS: usize = 360_000;
 /// Largest range noise (metres, 1 sigma) accepted: anything above is not a LiDAR.
 pub const MAX_RANGE_NOISE: f64 = 10.0;
+/// A full turn in degrees: the horizontal field of view of a spinning LiDAR, the default.
+pub const FULL_TURN_DEG: f64 = 360.0;
+/// Slack (in azimuth steps) when counting the columns of a limited field of view, so that a field
+/// that is a whole number of steps wide keeps its last column despite rounding.
+const COLUMN_COUNT_SLACK: f64 = 1e-9;
 
 /// The preset sensors. The default, the VLP-16, is the model the scenes and `lidarcal.sim` use
 /// when none is named.
@@ -104,6 +109,11 @@ impl Default for BeamSettings {
 /// A spinning multi-beam LiDAR: one beam per elevation, fired at `columns` equally spaced azimuths
 /// per revolution, starting at azimuth 0 (the sensor's +x axis) and turning counter-clockwise
 /// about +z.
+///
+/// A model may have a limited horizontal field of view ([`BeamModel::with_horizontal_fov`]),
+/// centred on +x: it then fires only the columns of the same azimuth grid step whose azimuths lie
+/// in `[-fov/2, fov/2]`, starting at `-fov/2` (see [`BeamModel::first_azimuth`] and
+/// [`BeamModel::swept_columns`]). The default field is the full turn.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BeamModel {
     name: String,
@@ -112,6 +122,8 @@ pub struct BeamModel {
     min_range: f64,
     max_range: f64,
     range_noise: f64,
+    /// Horizontal field of view, radians, in `(0, 2 pi]`.
+    horizontal_fov: f64,
 }
 
 fn uniform(first_deg: f64, last_deg: f64, count: usize) -> Vec<f64> {
@@ -141,6 +153,7 @@ impl BeamModel {
             min_range,
             max_range,
             range_noise,
+            horizontal_fov: FULL_TURN_DEG.to_radians(),
         }
     }
 
@@ -202,7 +215,21 @@ impl BeamModel {
             min_range,
             max_range,
             range_noise,
+            horizontal_fov: FULL_TURN_DEG.to_radians(),
         })
+    }
+
+    /// The same model with a horizontal field of view of `degrees` in `(0, 360]`, centred on the
+    /// sensor's +x axis (a forward-looking solid-state or masked unit). 360, the default, is the
+    /// full turn and sweeps exactly as a model without a limit does.
+    pub fn with_horizontal_fov(mut self, degrees: f64) -> Result<BeamModel> {
+        if !(degrees.is_finite() && degrees > 0.0 && degrees <= FULL_TURN_DEG) {
+            return Err(Error::InvalidInput(format!(
+                "horizontal field of view must be in (0, {FULL_TURN_DEG}] degrees, got {degrees}"
+            )));
+        }
+        self.horizontal_fov = degrees.to_radians();
+        Ok(self)
     }
 
     /// The same model with another default range noise (metres, 1 sigma).
@@ -243,6 +270,33 @@ impl BeamModel {
     /// Default range noise, metres (1 sigma, along the beam).
     pub fn range_noise(&self) -> f64 {
         self.range_noise
+    }
+    /// Horizontal field of view in radians, in `(0, 2 pi]`.
+    pub fn horizontal_fov(&self) -> f64 {
+        self.horizontal_fov
+    }
+    /// Whether the field of view is the full turn.
+    pub fn is_full_turn(&self) -> bool {
+        self.horizontal_fov >= std::f64::consts::TAU
+    }
+    /// Azimuth of the first column fired (radians): 0 for the full turn, `-fov/2` otherwise.
+    pub fn first_azimuth(&self) -> f64 {
+        if self.is_full_turn() {
+            0.0
+        } else {
+            -0.5 * self.horizontal_fov
+        }
+    }
+    /// Number of columns fired per revolution: [`columns`](Self::columns) for the full turn,
+    /// otherwise those of the azimuth grid in `[-fov/2, fov/2]` counted from `-fov/2` (at least
+    /// one, at most `columns`). Column `j` is fired at `first_azimuth() + j * azimuth_step()`.
+    pub fn swept_columns(&self) -> usize {
+        if self.is_full_turn() {
+            return self.columns;
+        }
+        let steps = (self.horizontal_fov / self.azimuth_step() + COLUMN_COUNT_SLACK).floor();
+        // `steps` is finite, non-negative and below `columns` here; the cast cannot truncate.
+        (steps as usize + 1).min(self.columns)
     }
 }
 
@@ -292,5 +346,23 @@ mod tests {
         assert!(BeamModel::custom("x", &[0.0], 360, 5.0, 1.0, 0.0).is_err());
         assert!(BeamModel::custom("x", &[0.0], 360, 0.1, 50.0, -1.0).is_err());
         assert!(Preset::from_name("lux").is_err());
+    }
+
+    #[test]
+    fn horizontal_field_of_view() {
+        let full = BeamModel::preset(Preset::Vlp16);
+        assert!(full.is_full_turn());
+        assert_eq!((full.first_azimuth(), full.swept_columns()), (0.0, 1800));
+        assert_eq!(full.clone().with_horizontal_fov(360.0).unwrap(), full);
+        let fov = full.clone().with_horizontal_fov(120.0).unwrap();
+        assert!(!fov.is_full_turn());
+        // -60 to +60 degrees inclusive in 0.2 degree steps.
+        assert_eq!(fov.swept_columns(), 601);
+        assert!((fov.first_azimuth().to_degrees() + 60.0).abs() < 1e-12);
+        let narrow = full.clone().with_horizontal_fov(0.1).unwrap();
+        assert_eq!(narrow.swept_columns(), 1);
+        for bad in [0.0, -10.0, 360.5, f64::NAN, f64::INFINITY] {
+            assert!(full.clone().with_horizontal_fov(bad).is_err(), "{bad}");
+        }
     }
 }

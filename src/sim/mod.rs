@@ -15,7 +15,10 @@
 //! intensities from its own `ChaCha8Rng` (seeded with `seed`, stream `i`), so the points are
 //! bit-identical whatever the number of threads. Output order is **ring-major**: ring 0 (the lowest
 //! beam) first, and within a ring by increasing azimuth column, starting at the sensor's +x axis and
-//! turning counter-clockwise about +z.
+//! turning counter-clockwise about +z. A model with a limited horizontal field of view
+//! ([`BeamModel::with_horizontal_fov`]) fires only the columns inside it, starting at `-fov/2` and
+//! turning counter-clockwise to `+fov/2`, so a ring's points are contiguous and in increasing
+//! azimuth; the columns outside the field are not cast at all.
 //!
 //! # Why poles need a cylinder fit
 //! A LiDAR sees the half of a pole that faces it, so a line fitted through a pole's points is offset
@@ -183,10 +186,12 @@ fn scan_ring(ctx: &RingContext<'_>, ring: usize, elevation: f64) -> Vec<ScanPoin
     rng.set_stream(ring as u64);
     let origin = Point3::from(ctx.world_from_sensor.translation.vector);
     let step = ctx.model.azimuth_step();
+    // 0 for the full turn, where `first + step * column` is bit for bit `step * column`.
+    let first = ctx.model.first_azimuth();
     let ring_id = u16::try_from(ring).unwrap_or(u16::MAX);
     let mut out = Vec::new();
-    for column in 0..ctx.model.columns() {
-        let d_sensor = beam_direction(elevation, step * column as f64);
+    for column in 0..ctx.model.swept_columns() {
+        let d_sensor = beam_direction(elevation, first + step * column as f64);
         let d_world = ctx.world_from_sensor.rotation * d_sensor;
         let mut nearest: Option<(usize, shapes::Hit)> = None;
         for (index, shape) in ctx.shapes.iter().enumerate() {
@@ -220,7 +225,7 @@ fn scan_ring(ctx: &RingContext<'_>, ring: usize, elevation: f64) -> Vec<ScanPoin
 
 /// Simulates one revolution of `model` at `world_from_sensor` among `shapes` (world frame).
 ///
-/// Every beam is cast at every azimuth column; the nearest surface hit with `t > 0` is measured if
+/// Every beam is cast at every azimuth column of the model's field of view; the nearest surface hit with `t > 0` is measured if
 /// its distance is within the model's range limits (a nearer-than-minimum surface blocks the beam).
 /// The range gets Gaussian noise along the beam, the return is dropped with probability
 /// `options.dropout`, and its intensity is drawn uniformly from the surface's range. Errors for a
@@ -295,6 +300,34 @@ mod tests {
         }
         // Ring-major order.
         assert!(s.points.windows(2).all(|w| w[0].ring <= w[1].ring));
+    }
+
+    #[test]
+    fn limited_field_of_view_sweeps_its_columns_only() {
+        let model = BeamModel::preset(Preset::Vlp16)
+            .with_horizontal_fov(90.0)
+            .unwrap();
+        let pose = Isometry3::translation(0.0, 0.0, 1.5);
+        let opts = ScanOptions {
+            range_noise: Some(0.0),
+            ..ScanOptions::default()
+        };
+        let s = scan(&model, &ground(), &pose, &opts).unwrap();
+        // 8 downward beams, -45..+45 degrees inclusive in 0.2 degree steps.
+        assert_eq!(s.len(), 8 * 451);
+        let limit = 45f64.to_radians() + 1e-9;
+        for w in s.points.windows(2) {
+            assert!(w[0].ring <= w[1].ring);
+            if w[0].ring == w[1].ring {
+                let a0 = w[0].position.y.atan2(w[0].position.x);
+                let a1 = w[1].position.y.atan2(w[1].position.x);
+                assert!(a0 < a1, "increasing azimuth within a ring");
+            }
+        }
+        assert!(s
+            .points
+            .iter()
+            .all(|p| p.position.y.atan2(p.position.x).abs() <= limit));
     }
 
     #[test]

@@ -422,6 +422,28 @@ impl Shape {
         }
     }
 
+    /// A sphere containing the shape: `(centre, radius)` (for culling shapes out of a sensor's
+    /// range before scanning).
+    pub fn bounding_sphere(&self) -> (Point3<f64>, f64) {
+        match &self.geometry {
+            Geometry::Rectangle(r) => {
+                let half_diagonal = (r.edge_u + r.edge_v) * 0.5;
+                (r.corner + half_diagonal, half_diagonal.norm())
+            }
+            Geometry::Cuboid(b) => (
+                Point3::from(b.world_from_box.translation.vector),
+                b.half_extents.norm(),
+            ),
+            Geometry::Cylinder(c) => {
+                let half = 0.5 * c.length;
+                (
+                    c.base + c.axis.into_inner() * half,
+                    (half * half + c.radius * c.radius).sqrt(),
+                )
+            }
+        }
+    }
+
     /// The nearest intersection of the ray `origin + t dir` (`dir` a unit vector) with `t > 0`.
     pub fn intersect(&self, origin: &Point3<f64>, dir: &Vector3<f64>) -> Option<Hit> {
         match &self.geometry {
@@ -482,6 +504,29 @@ mod tests {
             .unwrap();
         assert!((inside - 1.0).abs() < 1e-12);
         assert!(Cuboid::new(Isometry3::identity(), Vector3::new(1.0, 0.0, 1.0)).is_err());
+    }
+
+    #[test]
+    fn bounding_spheres_contain_the_shapes() {
+        let r = Rectangle::new(
+            Point3::new(1.0, 2.0, 0.0),
+            Vector3::x() * 4.0,
+            Vector3::z() * 3.0,
+        )
+        .unwrap();
+        let (c, radius) = Shape::rectangle(r, IntensityRange::WALL).bounding_sphere();
+        assert!((c - Point3::new(3.0, 2.0, 1.5)).norm() < 1e-12 && (radius - 2.5).abs() < 1e-12);
+        let b = Cuboid::new(
+            Isometry3::translation(5.0, 0.0, 1.0),
+            Vector3::new(2.0, 2.0, 2.0),
+        )
+        .unwrap();
+        let (c, radius) = Shape::cuboid(b, IntensityRange::CLUTTER).bounding_sphere();
+        assert!((c - Point3::new(5.0, 0.0, 1.0)).norm() < 1e-12);
+        assert!((radius - 3f64.sqrt()).abs() < 1e-12);
+        let y = Cylinder::new(Point3::new(0.0, 0.0, 1.0), Vector3::z(), 6.0, 4.0).unwrap();
+        let (c, radius) = Shape::cylinder(y, IntensityRange::POLE).bounding_sphere();
+        assert!((c - Point3::new(0.0, 0.0, 4.0)).norm() < 1e-12 && (radius - 5.0).abs() < 1e-12);
     }
 
     #[test]

@@ -14,11 +14,15 @@
 //!   roof HDL-64E and a 45-degree-tilted wide-angle side unit (the real road rigs' layout).
 //! * [`corridor_scene`]: a floor and two parallel walls, which leave the translation along the
 //!   corridor unobservable.
+//! * [`drive_scene`]: a vehicle driving an S through a town for 20 s, a forward-looking unit at
+//!   its front and a backward-looking one at its rear that never see the same thing at the same
+//!   time, with the true poses of every frame (calibration from motion).
 //!
 //! All layout draws come from one `ChaCha8Rng` seeded with the scene's seed, so a scene is a pure
 //! function of its options.
 
 mod corner;
+mod drive;
 mod paper;
 mod poles;
 mod street;
@@ -35,6 +39,11 @@ use crate::geometry::{Line, Plane};
 pub use corner::{
     corner_scene, CornerOptions, CORNER_MAX_TILT_DEG, CORNER_WALL_ANGLE_RANGE, CORNER_WALL_HEIGHT,
     CORNER_WALL_LENGTH, MAX_EXTRA_WALLS, SENSOR_CLEARANCE,
+};
+pub use drive::{
+    drive_model, drive_scene, DriveOptions, DriveScene, DRIVE_BLOCK_LENGTH_RANGE,
+    DRIVE_FIELD_OF_VIEW_DEG, DRIVE_GROUND_SHAPE, DRIVE_MAX_FRAMES, DRIVE_MAX_RATE_HZ,
+    DRIVE_MAX_SPEED, DRIVE_TURN_RADIUS,
 };
 pub use paper::{
     paper_configuration, paper_scene, PaperConfiguration, PaperOptions, PAPER_ALPHA_RANGE_DEG,
