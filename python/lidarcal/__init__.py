@@ -26,6 +26,10 @@ Calibration:
   tool) against the two clouds: a :class:`CheckReport` with the verdict ``"consistent"``,
   ``"inconsistent"`` or ``"unverifiable"``, its reason and the evidence. Every calibration passes
   its result through it and returns only consistent ones (``result.check``).
+* :func:`calibrate_sequence` -- from a drive: lists of synchronized frames of both sensors, which
+  need not see the same thing at the same time (front and rear units); each sensor's odometry,
+  hand-eye calibration of the motions, then the target's frames aligned to the reference's map.
+  Returns a :class:`SequenceResult`. :func:`odometry` gives one sensor's ``(K, 4, 4)`` poses.
 * :mod:`lidarcal.metrics` -- :func:`lidarcal.metrics.rqe`, the Renyi quadratic entropy
   crispness for comparing calibrations without ground truth.
 
@@ -64,14 +68,17 @@ from lidarcal._lidarcal import (
     PoleDetails,
     Refinement,
     RefineResult,
+    SequenceResult,
     TargetlessDetails,
     __version__,
     calibrate_planes,
     calibrate_poles,
+    calibrate_sequence,
     calibrate_targetless,
     check,
     extract_planes,
     kabsch,
+    odometry,
     ransac_line,
     ransac_plane,
     read_points,
@@ -106,17 +113,20 @@ __all__ = [
     "Refinement",
     "RigCalibration",
     "RigEdge",
+    "SequenceResult",
     "TargetlessDetails",
     "__version__",
     "calibrate",
     "calibrate_planes",
     "calibrate_poles",
     "calibrate_rig",
+    "calibrate_sequence",
     "calibrate_targetless",
     "check",
     "extract_planes",
     "kabsch",
     "metrics",
+    "odometry",
     "ransac_line",
     "ransac_plane",
     "read_points",

@@ -35,6 +35,7 @@ __all__ = [
     "RefineResult",
     "Refinement",
     "Scene",
+    "SequenceResult",
     "Shape",
     "TargetlessDetails",
     "__version__",
@@ -43,10 +44,12 @@ __all__ = [
     "calibrate_planes",
     "calibrate_poles",
     "calibrate_rig",
+    "calibrate_sequence",
     "calibrate_targetless",
     "check",
     "extract_planes",
     "kabsch",
+    "odometry",
     "overlap",
     "point_to_line_residuals",
     "point_to_plane_residuals",
@@ -171,6 +174,66 @@ def check(
     ``voxel_size=0.1``, ``samples=4000``, ``rotation_tolerance_deg=0.5``,
     ``translation_tolerance_m=0.06``.
     """
+
+@final
+class SequenceResult:
+    """What ``calibrate_sequence`` found: the extrinsic, the hand-eye start, the map alignment's
+    evidence and both trajectories."""
+
+    @property
+    def method(self) -> Literal["sequence"]: ...
+    @property
+    def transform(self) -> _F64Array: ...
+    @property
+    def hand_eye_transform(self) -> _F64Array: ...
+    @property
+    def unobserved_by_motion(self) -> _F64Array | None: ...
+    @property
+    def fitness(self) -> float: ...
+    @property
+    def rmse(self) -> float: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def reference_poses(self) -> _F64Array: ...
+    @property
+    def target_poses(self) -> _F64Array: ...
+    @property
+    def distance(self) -> float: ...
+    @property
+    def covariance(self) -> _F64Array | None: ...
+    @property
+    def weakest_translation(self) -> tuple[_F64Array, float]: ...
+    @property
+    def weakest_rotation(self) -> tuple[_F64Array, float]: ...
+    @property
+    def timings(self) -> dict[str, float]: ...
+
+def odometry(
+    frames: Sequence[_ArrayLike],
+    *,
+    voxel: float | None = None,
+    min_range: float | None = None,
+    max_range: float | None = None,
+) -> _F64Array:
+    """One sensor's ``(K, 4, 4)`` ``world_from_sensor`` poses from its frames (the world is the
+    first frame). Defaults (Rust ``OdometryOptions::default()``): ``voxel=1.0``,
+    ``min_range=0.5``, ``max_range=100.0``."""
+
+def calibrate_sequence(
+    reference_frames: Sequence[_ArrayLike],
+    target_frames: Sequence[_ArrayLike],
+    *,
+    seed: int = 0,
+    voxel: float | None = None,
+    min_range: float | None = None,
+    max_range: float | None = None,
+    strides: Sequence[int] | None = None,
+) -> SequenceResult:
+    """``reference_from_target`` from a drive: frame ``k`` of both lists at the same time.
+    ``strides`` default ``[5, 10, 20]``; the odometry's defaults as in ``odometry``."""
 
 class FileFormatError(ValueError):
     """A file is not a valid point cloud of its format; the message names the file and why."""

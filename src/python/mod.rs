@@ -21,6 +21,7 @@ mod io;
 mod kernels;
 mod ransac;
 mod result;
+mod sequence;
 mod sim;
 
 create_exception!(
@@ -109,6 +110,7 @@ fn _lidarcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     result::register(m)?;
     calib::register(m)?;
     check::register(m)?;
+    sequence::register(m)?;
     sim::register(m)?;
     defaults::register(m)?;
     Ok(())
