@@ -1,12 +1,13 @@
 //! Criterion benches of the scan simulator: one revolution of a VLP-16 and of an OS1-128 in the
-//! corner scene (two walls, ground, four clutter boxes).
+//! corner scene (two walls, ground, four clutter boxes), and the first two frames of the drive
+//! scene (both 120-degree units, the town laid out and culled per scan).
 //!
 //! Run with `cargo bench --bench sim`. The point counts are printed once before timing.
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use lidarcal::sim::scenes::{corner_scene, CornerOptions};
+use lidarcal::sim::scenes::{corner_scene, drive_scene, CornerOptions, DriveOptions};
 use lidarcal::sim::{scan, BeamModel, Preset, ScanOptions};
 
 fn bench_sweeps(c: &mut Criterion) {
@@ -37,5 +38,22 @@ fn bench_sweeps(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench_sweeps);
+fn bench_drive(c: &mut Criterion) {
+    let options = DriveOptions {
+        frames: 2,
+        ..DriveOptions::default()
+    };
+    let drive = drive_scene(&options).expect("drive scene");
+    eprintln!(
+        "sim/drive: {} shapes, {} + {} points in the first frame",
+        drive.shapes.len(),
+        drive.reference_frames[0].len(),
+        drive.target_frames[0].len()
+    );
+    c.bench_function("sim/drive two frames", |b| {
+        b.iter(|| drive_scene(black_box(&options)))
+    });
+}
+
+criterion_group!(benches, bench_sweeps, bench_drive);
 criterion_main!(benches);

@@ -308,13 +308,14 @@ def drive_scene(
 
     The vehicle drives a staircase route (blocks of 40-55 m joined by 90 degree arcs of 9 m
     radius, alternately left and right) at 7 m/s on flat ground (z = 0) for ``frames`` frames at
-    ``rate_hz`` (20 s and three turns by default), past facades, cross walls at the junctions,
-    parked cars, trees and poles. The reference unit is at the front (about 1.8 m forward, 0.6-1.1
-    m up, looking forward), the target at the rear (about 2.5 m back, looking backward), each with
-    a few degrees and centimetres of random mounting error, both a 64-beam model (-25 to +15
-    degrees, 0.2 degree columns, 0.5-100 m, ``range_noise`` None: 1 cm) limited to
-    ``field_of_view_deg`` about its +x axis: at 120 degrees their fields never meet. Both units
-    scan at the same instants (no motion distortion).
+    ``rate_hz`` (20 s and two or three turns by default), past facades, cross walls at the
+    junctions, parked cars, trees and poles. The reference unit is at the front (about 1.8 m
+    forward, 0.6-1.1 m up, looking forward), the target at the rear (about 2.5 m back, looking
+    backward), each with a few degrees and centimetres of random mounting error, both a 64-beam
+    model (-25 to +15 degrees, 0.2 degree columns, 0.5-100 m, ``range_noise`` None: 1 cm) limited
+    to ``field_of_view_deg`` about its +x axis: at 120 degrees their fields never meet. Both units
+    scan at the same instants (no motion distortion). A default frame holds about 37,500 points
+    from the front unit and 36,000 from the rear one; the drive takes about 11 s on two cores.
 
     ``body_motion`` adds pitch and roll of about 0.5-1.5 degrees (sinusoids and the lean in turns)
     and a centimetre of bounce; without it the motion is planar, which leaves the units' height

@@ -6,15 +6,15 @@
 //! A staircase of streets: the vehicle starts at the origin heading +x and at the end of every
 //! block (of random length, [`DRIVE_BLOCK_LENGTH_RANGE`]) turns 90 degrees, alternately left and
 //! right (which comes first is drawn from the seed), on circular arcs of radius
-//! [`DRIVE_TURN_RADIUS`] tangent to the straights, so the heading is continuous. It drives the centre line at a constant speed on flat ground (z = 0); the route is
-//! as long as the drive needs, so a default drive (200 frames at 10 Hz and 7 m/s, 139 m) takes
-//! three turns.
+//! [`DRIVE_TURN_RADIUS`] tangent to the straights, so the heading is continuous. It drives the
+//! centre line at a constant speed on flat ground (z = 0); the route is as long as the drive
+//! needs, so a default drive (200 frames at 10 Hz and 7 m/s, 139 m) takes two or three turns.
 //!
 //! # The vehicle's body
 //! With `body_motion` the body pitches and rolls by a few tenths of a degree as sums of sinusoids
 //! of incommensurate periods with phases from the seed, rolls outward in the turns in proportion
-//! to the lateral acceleration (the curvature averaged over [`CURVATURE_WINDOW`] metres, so the
-//! roll has no step where an arc starts), and its height bobs by about a centimetre: about
+//! to the lateral acceleration (the curvature averaged over 3 m either side, so the roll has no
+//! step where an arc starts), and its height bobs by about a centimetre: about
 //! 0.5–1.5 degrees in all. Without it the motion is exactly planar (constant height, no pitch or
 //! roll), the case where the units' height offset is unobservable from motion.
 //!
@@ -25,9 +25,9 @@
 //! tens of metres to a cross wall; the first and the last street end in a wall. Parked cars
 //! (boxes), tree trunks and poles (cylinders) line the kerbs. `shapes[0]` is the ground
 //! ([`DRIVE_GROUND_SHAPE`]); a default drive has about 70 shapes (seed 0: 72), a 200 s one
-//! about 520. Before each scan the shapes
-//! that cannot be reached (farther than the model's maximum range, or behind a unit whose field
-//! is at most 180 degrees) are culled, which changes no point.
+//! about 520. Before each scan the shapes that cannot be reached (farther than the model's
+//! maximum range, or behind a unit whose field is at most 180 degrees) are culled, which changes
+//! no point and keeps a frame's cost flat however long the drive.
 //!
 //! # The units
 //! Both use [`drive_model`] (64 beams from -25 to +15 degrees, 0.2 degree columns, 0.5–100 m,
@@ -97,8 +97,8 @@ const CROSS_STREET_LENGTH_RANGE: (f64, f64) = (12.0, 30.0);
 const FACADE_HEIGHT_RANGE: (f64, f64) = (6.0, 15.0);
 /// Margin of the ground rectangle around the route's junctions, metres (beyond the units' range).
 const GROUND_MARGIN: f64 = 120.0;
-/// Nominal mounting of the reference (front) unit in the body frame: forward, and the range of
-/// its height, metres.
+/// Nominal position of the reference (front) unit along the body, metres (positive: ahead of the
+/// body's origin).
 const REFERENCE_FORWARD: f64 = 1.8;
 /// Nominal position of the target (rear) unit along the body, metres (negative: behind).
 const TARGET_FORWARD: f64 = -2.5;
@@ -540,7 +540,7 @@ fn mount_units(rng: &mut ChaCha8Rng) -> (Isometry3<f64>, Isometry3<f64>) {
     (reference, target)
 }
 
-/// A 3D point on the ground plane at `p + up * z`.
+/// The point `z` metres above `p` of the ground plane.
 fn at_height(p: Vector2<f64>, z: f64) -> Point3<f64> {
     Point3::new(p.x, p.y, z)
 }
