@@ -232,13 +232,13 @@ fn calibrate_sequence(
     py: Python<'_>,
     reference_frames: &Bound<'_, PyAny>,
     target_frames: &Bound<'_, PyAny>,
-    seed: &Bound<'_, PyAny>,
+    #[pyo3(from_py_with = arrays::seed)] seed: u64,
     voxel: Option<f64>,
     min_range: Option<f64>,
     max_range: Option<f64>,
     strides: Option<Vec<usize>>,
 ) -> PyResult<SequenceResult> {
-    arrays::seed(seed)?;
+    let _ = seed; // validated by `arrays::seed`; no stage draws random numbers
     let reference = frames_arg(reference_frames, "reference_frames")?;
     let target = frames_arg(target_frames, "target_frames")?;
     let d = SequenceOptions::default();

@@ -143,6 +143,15 @@ fn check_frames(reference: &[Vec<Point3<f64>>], target: &[Vec<Point3<f64>>]) -> 
             reference.len()
         )));
     }
+    // Before any odometry runs, so a NaN is named as such and not as a lost track.
+    for (name, frames) in [("reference", reference), ("target", target)] {
+        for (k, frame) in frames.iter().enumerate() {
+            crate::error::ensure_finite(
+                &format!("{name} frame {k}"),
+                frame.iter().flat_map(|p| p.coords.iter()),
+            )?;
+        }
+    }
     Ok(())
 }
 
@@ -288,4 +297,74 @@ pub fn calibrate_sequence(
         weakest_rotation,
         timings: clock.finish(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frames(n: usize) -> Vec<Vec<Point3<f64>>> {
+        (0..n)
+            .map(|_| {
+                (0..200)
+                    .map(|i| Point3::new(i as f64 * 0.1, (i % 7) as f64, 0.0))
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn bad_drives_are_invalid_input() {
+        let options = SequenceOptions::default();
+        let e = calibrate_sequence(&frames(12), &frames(11), &options).unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidInput(ref m) if m.contains("same number")),
+            "{e}"
+        );
+        let e = calibrate_sequence(&frames(5), &frames(5), &options).unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidInput(ref m) if m.contains("at least 10")),
+            "{e}"
+        );
+        let mut nan = frames(12);
+        nan[4][3].y = f64::NAN;
+        let e = calibrate_sequence(&frames(12), &nan, &options).unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidInput(ref m) if m.contains("target frame 4")),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_standing_vehicle_is_unobservable() {
+        // A ground plane and two walls, the same frame twelve times.
+        let mut cloud = Vec::new();
+        for i in 0..60 {
+            for j in 0..60 {
+                let (a, b) = (i as f64 * 0.25 - 7.5, j as f64 * 0.25);
+                cloud.push(Point3::new(a, b - 7.5, -1.5));
+                cloud.push(Point3::new(a, 6.0, b - 1.5));
+                cloud.push(Point3::new(8.0, a, b - 1.5));
+            }
+        }
+        let drive = vec![cloud; 12];
+        let e = calibrate_sequence(&drive, &drive, &SequenceOptions::default()).unwrap_err();
+        assert_eq!(e.kind(), Some(FailureKind::Unobservable), "{e}");
+    }
+
+    #[test]
+    fn motion_pairs_cover_each_stride() {
+        let poses: Vec<Isometry3<f64>> = (0..30)
+            .map(|k| Isometry3::translation(k as f64, 0.0, 0.0))
+            .collect();
+        let odo = Odometry {
+            poses: poses.clone(),
+            frames: Vec::new(),
+            distance: 29.0,
+        };
+        let pairs = motion_pairs(&odo, &odo, &[5, 10, 40]);
+        // stride 5 starts every 2 frames (0..25), stride 10 every 5 (0..20); 40 > frames.
+        assert_eq!(pairs.len(), 13 + 4);
+        assert!((pairs[0].reference.translation.vector.x - 5.0).abs() < 1e-12);
+    }
 }
