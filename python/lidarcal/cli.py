@@ -3,6 +3,8 @@
 ``lidarcal calibrate REFERENCE TARGET [TARGET...]`` calibrates each target cloud (PCD, PLY, KITTI
 ``.bin``, ``.npy``, CSV/TXT, or a ROS bag with ``--topic``) to the reference and prints or writes
 the transforms (``--output x.yaml|.json|.txt|.urdf``, ``--json``, ``--plot x.png``).
+``lidarcal calibrate REFERENCE TARGET --sequence`` calibrates from a drive instead: every frame of
+two bag topics (``drive.bag:/front``) or two folders of numbered frames, ``--start``/``--end``.
 
 ``lidarcal check REFERENCE TARGET --transform FILE`` checks a stored transform against the two
 clouds (exit 0 consistent, 2 inconsistent, 3 unverifiable).
@@ -14,12 +16,14 @@ guess and prints the ground truth, the estimate and the errors (``--json`` for s
 Dask (:mod:`lidarcal.batch`, the ``fleet`` extra).
 
 ``lidarcal simulate --scene corner --model vlp16 --seed 0 --output out/`` writes
-``reference.pcd``, ``target.pcd`` and ``ground_truth.json`` (transforms and true geometry).
+``reference.pcd``, ``target.pcd`` and ``ground_truth.json`` (transforms and true geometry);
+``--scene drive`` writes two folders of numbered frames with their ``times.txt`` instead.
 """
 
 from __future__ import annotations
 
 import contextlib
+import inspect
 import json
 import sys
 from collections.abc import Iterable, Sequence
@@ -34,6 +38,7 @@ import lidarcal
 from lidarcal import (
     CalibrationError,
     CalibrationResult,
+    SequenceResult,
     __version__,
     calibrate_planes,
     read_points,
@@ -58,6 +63,8 @@ _MODEL = _defaults()["sim_scan"]["model"]
 _CORNER = _defaults()["sim_corner_scene"]
 _METHOD = _defaults()["calibrate_rig"]["method"]
 _MAX_BRIGHT_FRACTION = _defaults()["calibrate_poles"]["max_bright_fraction"]
+# The drive's frame count: `sim.drive_scene`'s own default.
+_DRIVE_FRAMES: int = inspect.signature(sim.drive_scene).parameters["frames"].default
 
 
 @click.group()
@@ -70,9 +77,12 @@ def main() -> None:
 @click.option(
     "--scene",
     "scene_name",
-    type=click.Choice(["corner", "poles", "paper"]),
+    type=click.Choice(["corner", "poles", "paper", "drive"]),
     default="corner",
     show_default=True,
+    help="drive: a vehicle driving through a town with a front (reference) and a rear (target) "
+    "unit; writes the folders reference/ and target/ of numbered frames with their times.txt, "
+    "for `lidarcal calibrate reference target --sequence`.",
 )
 @click.option("--model", type=click.Choice(list(sim.MODELS)), default=_MODEL, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
@@ -91,11 +101,24 @@ def main() -> None:
     help="pcd: binary PCD with x y z intensity ring; npy: (N, 5) float64 arrays.",
 )
 @click.option("--ascii", is_flag=True, help="Write ASCII PCD instead of binary.")
-def simulate(scene_name: str, model: str, seed: int, output: Path, fmt: str, ascii: bool) -> None:
+@click.option(
+    "--frames",
+    type=click.IntRange(2, 3000),
+    default=_DRIVE_FRAMES,
+    show_default=True,
+    help="drive: frames per unit, at 10 Hz (the vehicle turns first after about 6 s).",
+)
+def simulate(
+    scene_name: str, model: str, seed: int, output: Path, fmt: str, ascii: bool, frames: int
+) -> None:
     """Simulate a scene seen by two sensors and write one file per sensor plus ground truth.
 
-    The paper scene samples points (no beam model); --model is ignored for it.
+    The paper scene samples points (no beam model); --model is ignored for it and for the drive,
+    whose units have their own 64-beam model.
     """
+    if scene_name == "drive":
+        _simulate_drive(seed, output, fmt, ascii, frames)
+        return
     try:
         if scene_name == "corner":
             scene = sim.corner_scene(model, seed=seed)
@@ -134,6 +157,49 @@ def simulate(scene_name: str, model: str, seed: int, output: Path, fmt: str, asc
     click.echo(
         f"wrote {files['reference']} ({len(scene.reference)} points), "
         f"{files['target']} ({len(scene.target)} points) and ground_truth.json to {output}"
+    )
+
+
+def _simulate_drive(seed: int, output: Path, fmt: str, ascii: bool, frames: int) -> None:
+    """`simulate --scene drive`: output/reference/000000.pcd ... and output/target/..., each with
+    its times.txt, and ground_truth.json (the extrinsic and both units' true poses)."""
+    try:
+        drive = sim.drive_scene(seed, frames=frames)
+        files = {}
+        for name, clouds in (
+            ("reference", drive.reference_frames),
+            ("target", drive.target_frames),
+        ):
+            folder = output / name
+            folder.mkdir(parents=True, exist_ok=True)
+            digits = max(6, len(str(len(clouds) - 1)))
+            for k, cloud in enumerate(clouds):
+                path = folder / f"{k:0{digits}d}.{fmt}"
+                if fmt == "pcd":
+                    sim.write_pcd(path, cloud, ascii=ascii)
+                else:
+                    np.save(path, cloud)
+            (folder / "times.txt").write_text("".join(f"{t:.6f}\n" for t in drive.times))
+            files[name] = name + "/"
+        truth = {
+            "scene": "drive",
+            "seed": seed,
+            "frames": frames,
+            "files": files,
+            "columns": ["x", "y", "z", "intensity"],
+            "convention": "p_reference = reference_from_target @ p_target (homogeneous)",
+            "reference_from_target": drive.reference_from_target.tolist(),
+            "times": drive.times.tolist(),
+            "world_from_reference": drive.world_from_reference.tolist(),
+            "world_from_target": drive.world_from_target.tolist(),
+        }
+        (output / "ground_truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    except (ValueError, OSError) as e:
+        raise click.ClickException(str(e)) from e
+    click.echo(
+        f"wrote {frames} frames each to {output / 'reference'} and {output / 'target'} (with "
+        f"times.txt) and ground_truth.json; calibrate them with: lidarcal calibrate "
+        f"{output / 'reference'} {output / 'target'} --sequence"
     )
 
 
@@ -302,6 +368,17 @@ class SourceType(click.ParamType):  # type: ignore[type-arg]
             self.fail(f"{text}: no such file (a bag topic is given as BAG:/topic)", param, ctx)
 
 
+def _crop(points: np.ndarray, crop: Sequence[float] | None, text: str) -> np.ndarray:
+    if crop is None:
+        return points
+    lo, hi = np.array(crop[0::2]), np.array(crop[1::2])
+    keep = np.all((points[:, :3] >= lo) & (points[:, :3] <= hi), axis=1)
+    points = points[keep]
+    if len(points) == 0:
+        raise ValueError(f"{text}: no point is left inside the --crop box")
+    return points
+
+
 def load_cloud(
     source: Source, crop: Sequence[float] | None, topic: str | None, time: float | None
 ) -> np.ndarray:
@@ -310,15 +387,81 @@ def load_cloud(
 
     if source.topic is not None or is_bag(source.path):
         points = read_bag(source.path, source.topic or topic, time=time)
+    elif source.path.is_dir():
+        raise ValueError(f"{source.text}: a folder; a folder of frames is read with --sequence")
     else:
         points = read_points(source.path)
-    if crop is not None:
-        lo, hi = np.array(crop[0::2]), np.array(crop[1::2])
-        keep = np.all((points[:, :3] >= lo) & (points[:, :3] <= hi), axis=1)
-        points = points[keep]
-        if len(points) == 0:
-            raise ValueError(f"{source.text}: no point is left inside the --crop box")
-    return points
+    return _crop(points, crop, source.text)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """The frames of a `--sequence` source in time order, their times (seconds) and whether they
+    came from a bag (times to pair by) or a folder (frames to pair in order)."""
+
+    frames: list[np.ndarray]
+    times: np.ndarray
+    bag: bool
+
+
+def load_sequence(
+    source: Source,
+    crop: Sequence[float] | None,
+    topic: str | None,
+    start: float | None,
+    end: float | None,
+) -> Recording:
+    """Every frame of a bag topic or a folder of numbered frames between ``start`` and ``end``,
+    each cropped to the box."""
+    from lidarcal.frames import read_folder
+    from lidarcal.rosbag import is_bag, read_bag_frames
+
+    if source.topic is not None or is_bag(source.path):
+        frames, times = read_bag_frames(source.path, source.topic or topic, start=start, end=end)
+        bag = True
+    elif source.path.is_dir():
+        frames, times, _ = read_folder(source.path, start=start, end=end)
+        bag = False
+    else:
+        raise ValueError(
+            f"{source.text}: --sequence reads a bag topic (BAG:/topic) or a folder of numbered "
+            "frames, not a single file"
+        )
+    return Recording([_crop(f, crop, source.text) for f in frames], times, bag)
+
+
+def pair_recordings(
+    reference: Source, ref: Recording, target: Source, tgt: Recording
+) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """The frames of both taken at the same times and those times: two folders frame by frame
+    (the counts must match), two bags by nearest time (see :func:`lidarcal.frames.pair_by_time`)."""
+    from lidarcal.frames import pair_by_time
+
+    if ref.bag != tgt.bag:
+        raise ValueError(
+            f"{reference.text} is a {'bag' if ref.bag else 'folder'} and {target.text} a "
+            f"{'bag' if tgt.bag else 'folder'}; --sequence pairs two bags by time or two folders "
+            "frame by frame"
+        )
+    if not ref.bag:
+        if len(ref.frames) != len(tgt.frames):
+            raise ValueError(
+                f"{reference.text} has {len(ref.frames)} frames and {target.text} "
+                f"{len(tgt.frames)} (after --start/--end); two folders must pair up frame by "
+                "frame"
+            )
+        return ref.frames, tgt.frames, ref.times
+    pairs = pair_by_time(ref.times, tgt.times)
+    if not pairs:
+        raise ValueError(
+            f"no frame of {reference.text} has a frame of {target.text} within half a frame "
+            "period: were they recorded together?"
+        )
+    return (
+        [ref.frames[i] for i, _ in pairs],
+        [tgt.frames[j] for _, j in pairs],
+        np.array([ref.times[i] for i, _ in pairs]),
+    )
 
 
 def _method_kwargs(options: dict[str, Any]) -> dict[str, Any]:
@@ -369,8 +512,20 @@ def _summary(entry: dict[str, Any], parent: str, child: str) -> str:
             f"  1-sigma (noise)   translation {plain.format(*sd_t)} cm, "
             f"rotation {plain.format(*sd_r)} deg"
         )
-    rmse = ", ".join(f"{100 * r:.2f}" for r in entry["rmse"])
-    lines.append(f"  feature rmse cm   {rmse}")
+    if entry["method"] == "sequence":
+        d = entry["diagnostics"]
+        rot, trans = _errors(np.array(d["hand_eye_transform"]), t)
+        lines.append(
+            f"  drive             {d['frames']} frames, {d['distance_m']:.0f} m; map fitness "
+            f"{100 * d['fitness']:.0f} %, rmse {100 * d['rmse']:.2f} cm"
+        )
+        lines.append(
+            f"  hand-eye          {rot:.3f} deg / {100 * trans:.1f} cm from the result "
+            "(the motion alone)"
+        )
+    else:
+        rmse = ", ".join(f"{100 * r:.2f}" for r in entry["rmse"])
+        lines.append(f"  feature rmse cm   {rmse}")
     if "rig" in entry:
         edges = entry["rig"]["edges"]
         worst_r = max(e["rotation_residual_deg"] for e in edges)
@@ -493,6 +648,86 @@ def _rig_entries(
     return entries
 
 
+#: The options of `calibrate` that do not apply to `--sequence` (parameter name, option).
+_NOT_FOR_SEQUENCE = (
+    ("method", "--method"),
+    ("up", "--up"),
+    ("threshold", "--threshold"),
+    ("intensity_threshold", "--intensity-threshold"),
+    ("vendor", "--vendor"),
+    ("max_bright_fraction", "--max-bright-fraction"),
+    ("bag_time", "--time"),
+    ("rig", "--rig"),
+)
+
+
+def _sequence_options(targets: tuple[Source, ...]) -> None:
+    """Refuses what `--sequence` does not take: several targets, the single-cloud options."""
+    ctx = click.get_current_context()
+    for name, option in _NOT_FOR_SEQUENCE:
+        if ctx.get_parameter_source(name) not in (None, click.core.ParameterSource.DEFAULT):
+            raise click.BadParameter(
+                "does not apply to --sequence (--start/--end pick the frames)", param_hint=option
+            )
+    if len(targets) != 1:
+        raise click.BadParameter(
+            f"--sequence calibrates one TARGET to the REFERENCE, got {len(targets)} targets",
+            param_hint="TARGETS",
+        )
+
+
+def _sequence_entry(
+    reference: Source,
+    target: Source,
+    crop: Sequence[float] | None,
+    topic: str | None,
+    start: float | None,
+    end: float | None,
+    plot: Path | None,
+) -> dict[str, Any]:
+    """`--sequence`: reads and pairs both recordings (a problem there is a one-line error),
+    calibrates them with :func:`lidarcal.calibrate_sequence` and returns the result's entry, or
+    an error entry (with the kind of a refusal) as the other methods do."""
+    ctx = click.get_current_context()
+    try:
+        ref = load_sequence(reference, crop, topic, start, end)
+        tgt = load_sequence(target, crop, topic, start, end)
+        ref_frames, tgt_frames, times = pair_recordings(reference, ref, target, tgt)
+    except (ValueError, OSError) as e:
+        raise click.ClickException(str(e)) from e
+    try:
+        result = lidarcal.calibrate_sequence(ref_frames, tgt_frames, seed=ctx.params["seed"])
+    except (ValueError, CalibrationError) as e:
+        return _error_entry(reference, target, e)
+    entry = to_dict(
+        result,
+        reference=reference.text,
+        target=target.text,
+        reference_frame=reference.frame,
+        target_frame=target.frame,
+    )
+    entry["sequence"] = {
+        "frames": len(times),
+        "read": [len(ref.frames), len(tgt.frames)],
+        "time_span_s": [float(times[0]), float(times[-1])],
+    }
+    if plot is not None:
+        _plot_sequence(result, times - times[0], plot, f"{target.text} -> {reference.text}")
+        entry["plot"] = str(plot)
+    return entry
+
+
+def _plot_sequence(result: SequenceResult, times: np.ndarray, png: Path, title: str) -> None:
+    try:
+        from lidarcal.plot import trajectories
+
+        trajectories(result, times=times, path=png, title=title)
+    except ImportError as e:
+        raise click.ClickException(str(e)) from e
+    except OSError as e:
+        raise click.ClickException(f"{png}: {e}") from e
+
+
 @main.command()
 @click.argument("reference", type=SourceType())
 @click.argument("targets", nargs=-1, required=True, type=SourceType())
@@ -565,6 +800,22 @@ def _rig_entries(
     "barely sees can be placed through another. Each result's `rig` field lists its edges.",
 )
 @click.option(
+    "--sequence",
+    is_flag=True,
+    help="Calibrate from a drive: REFERENCE and TARGET are two bag topics (BAG:/topic; frames "
+    "paired by nearest time) or two folders of numbered frames (PCD/PLY/bin/npy, with an "
+    "optional times.txt; paired frame by frame). Both sensors' odometry, hand-eye calibration of "
+    "the motions, then the target's frames aligned to the reference's map. The vehicle must "
+    "move and turn.",
+)
+@click.option(
+    "--start",
+    type=float,
+    help="--sequence: the first frame's time, seconds from the start of the bag or folder (or a "
+    "Unix time); for a folder without times.txt, frames from its first.",
+)
+@click.option("--end", type=float, help="--sequence: the last frame's time, as --start.")
+@click.option(
     "--json",
     "as_json",
     is_flag=True,
@@ -587,6 +838,9 @@ def calibrate(
     output: Path | None,
     plot: Path | None,
     rig: bool,
+    sequence: bool,
+    start: float | None,
+    end: float | None,
     as_json: bool,
 ) -> None:
     """Calibrate each TARGET cloud to the REFERENCE cloud, with no initial guess.
@@ -601,6 +855,8 @@ def calibrate(
       lidarcal calibrate top.pcd left.pcd right.pcd --crop -20,20,-20,20,-3,10 --json
       lidarcal calibrate drive.bag:/top/points drive.bag:/left/points --time 12.5
       lidarcal calibrate top.pcd left.pcd right.pcd rear.pcd --rig --output rig.urdf
+      lidarcal calibrate drive.bag:/front drive.bag:/rear --sequence --start 5 --end 25
+      lidarcal calibrate drive/reference drive/target --sequence --output rear.yaml
 
     Exits with status 1 and a one-line message if a calibration fails; the other targets are
     still calibrated and reported.
@@ -620,58 +876,65 @@ def calibrate(
     }
     if output is not None:
         _check_output(output)
-    try:
-        ref_points = load_cloud(reference, crop_box, topic, bag_time)
-    except (ValueError, OSError) as e:
-        raise click.ClickException(str(e)) from e
-
     entries: list[dict[str, Any]] = []
-    if rig:
-        loaded: list[tuple[Source, np.ndarray]] = []
-        for target in targets:
-            try:
-                loaded.append((target, load_cloud(target, crop_box, topic, bag_time)))
-            except (ValueError, OSError) as e:
-                entries.append(_error_entry(reference, target, e))
-        if loaded:
-            entries.extend(_rig_entries(reference, ref_points, loaded, method, options, plot))
-            order = {t.text: i for i, t in enumerate(targets)}
-            entries.sort(key=lambda e: order.get(e["target"], 0))
+    if sequence:
+        _sequence_options(targets)
+        entries.append(_sequence_entry(reference, targets[0], crop_box, topic, start, end, plot))
     else:
-        show_progress = len(targets) > 1 and sys.stderr.isatty()
-        with contextlib.ExitStack() as stack:
-            items: Iterable[Source] = targets
-            if show_progress:
-                items = stack.enter_context(
-                    click.progressbar(
-                        targets,
-                        label="calibrating",
-                        file=sys.stderr,
-                        item_show_func=lambda p: p.text if p is not None else None,
-                    )
-                )
-            for target in items:
+        for name, value in (("--start", start), ("--end", end)):
+            if value is not None:
+                raise click.BadParameter("needs --sequence", param_hint=name)
+        try:
+            ref_points = load_cloud(reference, crop_box, topic, bag_time)
+        except (ValueError, OSError) as e:
+            raise click.ClickException(str(e)) from e
+
+        if rig:
+            loaded: list[tuple[Source, np.ndarray]] = []
+            for target in targets:
                 try:
-                    tgt_points = load_cloud(target, crop_box, topic, bag_time)
-                    result = _calibrate(method, ref_points, tgt_points, options)
-                except (ValueError, OSError, CalibrationError) as e:
+                    loaded.append((target, load_cloud(target, crop_box, topic, bag_time)))
+                except (ValueError, OSError) as e:
                     entries.append(_error_entry(reference, target, e))
-                    continue
-                entry = to_dict(
-                    result,
-                    reference=reference.text,
-                    target=target.text,
-                    reference_frame=reference.frame,
-                    target_frame=target.frame,
-                )
-                entries.append(entry)
-                if plot is not None:
-                    png = plot
-                    if len(targets) > 1:
-                        png = plot.with_name(f"{plot.stem}_{target.frame}{plot.suffix}")
-                    title = f"{target.path.name} -> {reference.path.name}"
-                    _plot(ref_points, tgt_points, result, png, title)
-                    entry["plot"] = str(png)
+            if loaded:
+                entries.extend(_rig_entries(reference, ref_points, loaded, method, options, plot))
+                order = {t.text: i for i, t in enumerate(targets)}
+                entries.sort(key=lambda e: order.get(e["target"], 0))
+        else:
+            show_progress = len(targets) > 1 and sys.stderr.isatty()
+            with contextlib.ExitStack() as stack:
+                items: Iterable[Source] = targets
+                if show_progress:
+                    items = stack.enter_context(
+                        click.progressbar(
+                            targets,
+                            label="calibrating",
+                            file=sys.stderr,
+                            item_show_func=lambda p: p.text if p is not None else None,
+                        )
+                    )
+                for target in items:
+                    try:
+                        tgt_points = load_cloud(target, crop_box, topic, bag_time)
+                        result = _calibrate(method, ref_points, tgt_points, options)
+                    except (ValueError, OSError, CalibrationError) as e:
+                        entries.append(_error_entry(reference, target, e))
+                        continue
+                    entry = to_dict(
+                        result,
+                        reference=reference.text,
+                        target=target.text,
+                        reference_frame=reference.frame,
+                        target_frame=target.frame,
+                    )
+                    entries.append(entry)
+                    if plot is not None:
+                        png = plot
+                        if len(targets) > 1:
+                            png = plot.with_name(f"{plot.stem}_{target.frame}{plot.suffix}")
+                        title = f"{target.path.name} -> {reference.path.name}"
+                        _plot(ref_points, tgt_points, result, png, title)
+                        entry["plot"] = str(png)
 
     for entry in entries:
         if entry.get("diagnostics", {}).get("ambiguous"):

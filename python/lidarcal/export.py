@@ -34,6 +34,7 @@ from lidarcal._lidarcal import (
     CalibrationResult,
     PlanarDetails,
     PoleDetails,
+    SequenceResult,
     TargetlessDetails,
 )
 
@@ -105,7 +106,7 @@ def _list(a: Any) -> Any:
 
 
 def to_dict(
-    result: CalibrationResult,
+    result: CalibrationResult | SequenceResult,
     *,
     reference: str | None = None,
     target: str | None = None,
@@ -119,7 +120,11 @@ def to_dict(
 
     ``transform`` reports another pose than ``result.transform`` (e.g. the one a rig's pose graph
     made of it): the pose fields are that transform, ``diagnostics["method_transform"]`` keeps
-    the method's own, and the 1-sigma fields (which describe the method's pose) are left out."""
+    the method's own, and the 1-sigma fields (which describe the method's pose) are left out.
+
+    A :class:`~lidarcal.SequenceResult` (calibration from a drive) has the same pose fields; its
+    ``rmse`` is the one map alignment's, ``[rmse]``, there is no ``check``, and its diagnostics
+    are the drive's evidence (:func:`_sequence_diagnostics`)."""
     own = np.asarray(result.transform)
     t = own if transform is None else np.asarray(transform, dtype=np.float64)
     if t.shape != (4, 4):
@@ -137,14 +142,23 @@ def to_dict(
         "quaternion_xyzw": quaternion_xyzw(rotation).tolist(),
         "rpy_rad": angles.tolist(),
         "rpy_deg": np.degrees(angles).tolist(),
-        "converged": bool(result.refinement.converged),
-        "rmse": _list(result.rmse),
     }
     cov = result.covariance
+    if isinstance(result, SequenceResult):
+        out["converged"] = bool(result.converged)
+        out["rmse"] = [float(result.rmse)]  # the one alignment: the target's frames to the map
+    else:
+        out["converged"] = bool(result.refinement.converged)
+        out["rmse"] = _list(result.rmse)
     if cov is not None and transform is None:
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         out["std_translation_m"] = sd[:3].tolist()
         out["std_rotation_deg"] = np.degrees(sd[3:]).tolist()
+    if isinstance(result, SequenceResult):
+        out["diagnostics"] = _sequence_diagnostics(result)
+        if transform is not None:
+            out["diagnostics"]["method_transform"] = own.tolist()
+        return out
     refinement = result.refinement
     diagnostics: dict[str, Any] = {
         "solver": refinement.solver,
@@ -165,6 +179,31 @@ def to_dict(
     out["diagnostics"] = diagnostics
     out["check"] = result.check.to_dict()
     return out
+
+
+def _sequence_diagnostics(result: SequenceResult) -> dict[str, Any]:
+    """The evidence of a calibration from a drive: how well the target's frames, placed by the
+    result, lie on the reference's map (``fitness``, the share of its samples on the map, and
+    ``rmse``), how far the vehicle went, the hand-eye estimate from the motion alone and what the
+    motion left unobserved."""
+    direction, share = result.weakest_translation
+    rot_direction, rot_share = result.weakest_rotation
+    unobserved = result.unobserved_by_motion
+    return {
+        "fitness": float(result.fitness),
+        "rmse": float(result.rmse),
+        "distance_m": float(result.distance),
+        "frames": len(result.reference_poses),
+        "iterations": int(result.iterations),
+        "hand_eye_transform": np.asarray(result.hand_eye_transform).tolist(),
+        "unobserved_by_motion": _list(unobserved),
+        "weakest_translation_direction": _list(direction),
+        "weakest_translation_share": float(share),
+        "weakest_rotation_direction": _list(rot_direction),
+        "weakest_rotation_share": float(rot_share),
+        "timings_ms": dict(result.timings),
+        "covariance": _list(result.covariance),
+    }
 
 
 def _details(details: PlanarDetails | PoleDetails | TargetlessDetails) -> dict[str, Any]:

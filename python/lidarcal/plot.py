@@ -5,6 +5,9 @@ initial guess) and after calibration, from the top and from the side, the refere
 target in orange; the planes or poles the method matched are highlighted; a histogram shows the
 target's residuals against the matched reference planes (or pole surfaces) after calibration.
 
+:func:`trajectories` draws a calibration from a drive (:class:`~lidarcal.SequenceResult`): both
+sensors' paths from the top, the target's mapped into the reference's world by the result.
+
 >>> import numpy as np, lidarcal
 >>> from lidarcal import sim
 >>> from lidarcal.plot import overlay
@@ -23,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from lidarcal._lidarcal import CalibrationResult, PoleDetails
+from lidarcal._lidarcal import CalibrationResult, PoleDetails, SequenceResult
 from lidarcal.export import rpy
 
 if TYPE_CHECKING:
@@ -37,7 +40,7 @@ TARGET_COLOUR = "#ff7f0e"
 HIGHLIGHTS = ["#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22"]
 MAX_POINTS = 40_000
 
-__all__ = ["overlay", "residuals"]
+__all__ = ["overlay", "residuals", "target_in_reference_world", "trajectories"]
 
 
 def _figure_class() -> Any:
@@ -219,6 +222,85 @@ def overlay(
     else:
         ax.set_axis_off()
         ax.set_title("no matched features to show residuals for", fontsize=10)
+    if path is not None:
+        fig.savefig(path, dpi=150)
+    return fig
+
+
+def target_in_reference_world(result: SequenceResult) -> tuple[F64Array, F64Array]:
+    """The target's odometry carried into the reference's world by ``result.transform`` (``T``):
+    ``(target, predicted)``, two ``(K, 4, 4)`` pose arrays. ``target[k]`` is the target sensor's
+    pose, ``R0 T inv(G0) G_k`` with ``R`` the reference's and ``G`` the target's poses: it runs
+    beside the reference's path, offset by the mounting. ``predicted[k] = target[k] inv(T)`` is
+    where the target's motion puts the reference sensor: on a good calibration it lies on the
+    reference's own path, and the gap between them is the two odometries' disagreement."""
+    t = np.asarray(result.transform, dtype=np.float64)
+    ref = np.asarray(result.reference_poses, dtype=np.float64)
+    tgt = np.asarray(result.target_poses, dtype=np.float64)
+    world = ref[0] @ t @ np.linalg.inv(tgt[0])
+    target: F64Array = world @ tgt
+    predicted: F64Array = target @ np.linalg.inv(t)
+    return target, predicted
+
+
+def trajectories(
+    result: SequenceResult,
+    *,
+    times: npt.ArrayLike | None = None,
+    path: str | Path | None = None,
+    title: str | None = None,
+) -> Figure:
+    """A calibration from a drive: both sensors' paths from the top (x-y of the reference's
+    world, its first frame), the reference in blue, the target in orange (mapped by
+    :func:`target_in_reference_world`, offset by the mounting) and, dashed, the reference's path
+    as the target's motion predicts it; beside it the gap between the reference's poses and that
+    prediction, frame by frame (against ``times`` in seconds when given). Returns the figure and
+    writes it to ``path`` (PNG, 150 dpi) when given."""
+    figure_class = _figure_class()
+    ref = np.asarray(result.reference_poses, dtype=np.float64)
+    target, predicted = target_in_reference_world(result)
+    x = np.arange(len(ref), dtype=np.float64) if times is None else np.asarray(times, np.float64)
+    if x.shape != (len(ref),):
+        raise ValueError(f"times must hold one time per frame ({len(ref)}), got shape {x.shape}")
+
+    fig: Figure = figure_class(figsize=(14, 6), layout="constrained")
+    grid = fig.add_gridspec(1, 3)
+    transform = np.asarray(result.transform, dtype=np.float64)
+    angles = np.degrees(rpy(transform[:3, :3]))
+    pose = (
+        f"t = [{', '.join(f'{v:+.3f}' for v in transform[:3, 3])}] m, "
+        f"roll-pitch-yaw = [{', '.join(f'{v:+.2f}' for v in angles)}] deg"
+    )
+    fig.suptitle(
+        f"{title or 'lidarcal'} (sequence, {len(ref)} frames, {result.distance:.0f} m): {pose}\n"
+        f"map fitness {100 * result.fitness:.0f} %, rmse {100 * result.rmse:.1f} cm",
+        fontsize=11,
+    )
+    ax = fig.add_subplot(grid[0, :2])
+    ax.plot(ref[:, 0, 3], ref[:, 1, 3], color=REFERENCE_COLOUR, label="reference")
+    ax.plot(target[:, 0, 3], target[:, 1, 3], color=TARGET_COLOUR, label="target")
+    ax.plot(
+        predicted[:, 0, 3],
+        predicted[:, 1, 3],
+        color=TARGET_COLOUR,
+        linestyle="--",
+        linewidth=0.8,
+        label="reference, from the target's motion",
+    )
+    ax.scatter(ref[:1, 0, 3], ref[:1, 1, 3], c="k", s=12, zorder=3, label="start")
+    ax.set_title("trajectories, top (x-y of the reference's first frame)", fontsize=10)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, linewidth=0.3)
+    ax.legend(fontsize=8, loc="best")
+    ax = fig.add_subplot(grid[0, 2])
+    gap = np.linalg.norm(ref[:, :3, 3] - predicted[:, :3, 3], axis=1)
+    ax.plot(x, 100 * gap, color=TARGET_COLOUR)
+    ax.set_title("reference path minus its prediction from the target", fontsize=10)
+    ax.set_xlabel("time (s)" if times is not None else "frame")
+    ax.set_ylabel("distance (cm)")
+    ax.grid(True, linewidth=0.3)
     if path is not None:
         fig.savefig(path, dpi=150)
     return fig

@@ -1,4 +1,7 @@
-"""One ``sensor_msgs/PointCloud2`` frame from a ROS 1 or ROS 2 bag, with no ROS installation.
+"""``sensor_msgs/PointCloud2`` frames from a ROS 1 or ROS 2 bag, with no ROS installation.
+
+:func:`read_bag` reads one frame, :func:`read_bag_frames` every frame of a topic in a time range
+(with their times, for calibration from a drive).
 
 Needs the ``rosbags`` package: ``pip install 'lidarcal[rosbag]'``. ROS 1 ``.bag`` files and ROS 2
 bag directories (sqlite3 or mcap) are read with ``rosbags.highlevel.AnyReader``; the message's
@@ -23,7 +26,7 @@ from lidarcal._lidarcal import INTENSITY_NAMES, FileFormatError
 
 F64Array = npt.NDArray[np.float64]
 
-__all__ = ["BAG_SUFFIXES", "is_bag", "read_bag", "split_source"]
+__all__ = ["BAG_SUFFIXES", "is_bag", "read_bag", "read_bag_frames", "split_source"]
 
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 POINTCLOUD2 = ("sensor_msgs/msg/PointCloud2", "sensor_msgs/PointCloud2")
@@ -110,19 +113,8 @@ def decode_pointcloud2(msg: Any, fields: Sequence[str] | None = None) -> tuple[F
     return points[np.isfinite(points).all(axis=1)], wanted
 
 
-def read_bag(
-    path: str | os.PathLike[str],
-    topic: str | None = None,
-    *,
-    time: float | None = None,
-    fields: Sequence[str] | None = None,
-) -> F64Array:
-    """One PointCloud2 frame of a bag as an ``(N, K)`` float64 array.
-
-    ``topic`` may be omitted when the bag has exactly one PointCloud2 topic. ``time`` picks the
-    message nearest to it: seconds from the start of the bag if below 1e9, otherwise a Unix time in
-    seconds; default the first message.
-    """
+def _open(path: str | os.PathLike[str]) -> Any:
+    """An opened ``AnyReader`` of the bag at ``path``."""
     try:
         from rosbags.highlevel import AnyReader
     except ImportError as e:  # pragma: no cover - depends on the environment
@@ -137,24 +129,51 @@ def read_bag(
         reader.open()
     except Exception as e:  # rosbags raises its own error types for corrupt bags
         raise FileFormatError(f"{bag}: not a readable ROS bag ({e})") from e
-    try:
-        clouds = [c for c in reader.connections if c.msgtype in POINTCLOUD2]
-        available = sorted({c.topic for c in clouds})
-        if topic is None:
-            if len(available) != 1:
-                raise ValueError(
-                    f"{bag}: name the topic; PointCloud2 topics: {', '.join(available) or 'none'}"
-                )
-            topic = available[0]
-        chosen = [c for c in clouds if c.topic == topic]
-        if not chosen:
+    return reader
+
+
+def _connections(reader: Any, bag: Path, topic: str | None) -> tuple[str, list[Any]]:
+    """The topic (the only PointCloud2 one when ``topic`` is None) and its connections."""
+    clouds = [c for c in reader.connections if c.msgtype in POINTCLOUD2]
+    available = sorted({c.topic for c in clouds})
+    if topic is None:
+        if len(available) != 1:
             raise ValueError(
-                f"{bag}: no PointCloud2 topic {topic!r}; "
-                f"there are: {', '.join(available) or 'none'}"
+                f"{bag}: name the topic; PointCloud2 topics: {', '.join(available) or 'none'}"
             )
-        stamp = None
-        if time is not None:
-            stamp = int(time * 1e9) if time >= 1e9 else reader.start_time + int(time * 1e9)
+        topic = available[0]
+    chosen = [c for c in clouds if c.topic == topic]
+    if not chosen:
+        raise ValueError(
+            f"{bag}: no PointCloud2 topic {topic!r}; there are: {', '.join(available) or 'none'}"
+        )
+    return topic, chosen
+
+
+def _stamp(reader: Any, time: float) -> int:
+    """Nanoseconds of a time given as seconds from the bag's start (below 1e9) or Unix time."""
+    ns = round(time * 1e9)
+    return ns if time >= 1e9 else int(reader.start_time) + ns
+
+
+def read_bag(
+    path: str | os.PathLike[str],
+    topic: str | None = None,
+    *,
+    time: float | None = None,
+    fields: Sequence[str] | None = None,
+) -> F64Array:
+    """One PointCloud2 frame of a bag as an ``(N, K)`` float64 array.
+
+    ``topic`` may be omitted when the bag has exactly one PointCloud2 topic. ``time`` picks the
+    message nearest to it: seconds from the start of the bag if below 1e9, otherwise a Unix time in
+    seconds; default the first message.
+    """
+    bag = Path(path)
+    reader = _open(bag)
+    try:
+        topic, chosen = _connections(reader, bag, topic)
+        stamp = None if time is None else _stamp(reader, time)
         best: tuple[int, Any] | None = None
         for connection, timestamp, raw in reader.messages(connections=chosen):
             if stamp is None:
@@ -169,5 +188,50 @@ def read_bag(
             msg = reader.deserialize(msg[1], msg[0].msgtype)
         points, _ = decode_pointcloud2(msg, fields)
         return points
+    finally:
+        reader.close()
+
+
+def read_bag_frames(
+    path: str | os.PathLike[str],
+    topic: str | None = None,
+    *,
+    start: float | None = None,
+    end: float | None = None,
+    fields: Sequence[str] | None = None,
+) -> tuple[list[F64Array], F64Array]:
+    """Every PointCloud2 frame of a topic between ``start`` and ``end`` (inclusive; seconds from
+    the start of the bag if below 1e9, otherwise Unix times; default the whole bag), in time
+    order: ``(frames, times)``, a list of ``(N, K)`` float64 arrays as :func:`read_bag` gives and
+    their Unix times in seconds.
+
+    A frame's time is its header stamp (when the sensor measured it), or the time it was
+    recorded when the stamp is zero; ``start`` and ``end`` select on the same times.
+    """
+    bag = Path(path)
+    reader = _open(bag)
+    try:
+        topic, chosen = _connections(reader, bag, topic)
+        lo = None if start is None else _stamp(reader, start)
+        hi = None if end is None else _stamp(reader, end)
+        found: list[tuple[int, F64Array]] = []
+        for connection, timestamp, raw in reader.messages(connections=chosen):
+            msg = reader.deserialize(raw, connection.msgtype)
+            header = msg.header.stamp
+            stamp = int(header.sec) * 10**9 + int(header.nanosec)
+            stamp = stamp or int(timestamp)
+            if (lo is not None and stamp < lo) or (hi is not None and stamp > hi):
+                continue
+            points, _ = decode_pointcloud2(msg, fields)
+            found.append((stamp, points))
+        if not found:
+            span = "".join(
+                f" {word} {bound:g} s"
+                for word, bound in (("from", start), ("to", end))
+                if bound is not None
+            )
+            raise ValueError(f"{bag}: topic {topic!r} has no messages{span}")
+        found.sort(key=lambda item: item[0])
+        return [p for _, p in found], np.array([t for t, _ in found], dtype=np.float64) / 1e9
     finally:
         reader.close()
