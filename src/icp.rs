@@ -463,21 +463,46 @@ impl IcpResult {
 /// A target point and, for the normal-compatibility gate, its own surface normal.
 type Sample = (Point3<f64>, Option<Vector3<f64>>);
 
-/// Normal equations plus the count of correspondences and the sum of squared residuals.
+/// Normal equations of point-to-plane correspondences, with their count and the loss-weighted
+/// sum of squared residuals (ICP here, the odometry's registration and a drive's map alignment).
 #[derive(Debug, Clone, Copy, Default)]
-struct IcpSums {
-    ne: NormalEquations,
-    matched: usize,
-    squared: f64,
-    weight: f64,
+pub(crate) struct PlaneSums {
+    pub(crate) ne: NormalEquations,
+    pub(crate) matched: usize,
+    pub(crate) squared: f64,
+    pub(crate) weight: f64,
 }
 
-impl Accumulator for IcpSums {
+impl Accumulator for PlaneSums {
     fn merge(&mut self, o: &Self) {
         self.ne.merge(&o.ne);
         self.matched += o.matched;
         self.squared += o.squared;
         self.weight += o.weight;
+    }
+}
+
+impl PlaneSums {
+    /// Adds the residual `r = n . (q - m)` of a correspondence with unit normal `n` at the mapped
+    /// point `q`, for a left perturbation of the pose that maps it (Jacobian row `[n, q x n]`).
+    #[inline]
+    pub(crate) fn add(&mut self, r: f64, n: &Vector3<f64>, q: &Vector3<f64>, loss: Loss) {
+        let c = q.cross(n);
+        self.ne
+            .add(r, &Vector6::new(n.x, n.y, n.z, c.x, c.y, c.z), loss);
+        self.matched += 1;
+        let w = loss.weight(r * r);
+        self.squared += w * r * r;
+        self.weight += w;
+    }
+
+    /// The loss-weighted root-mean-square residual (0 without correspondences).
+    pub(crate) fn rmse(&self) -> f64 {
+        if self.weight > 0.0 {
+            (self.squared / self.weight).sqrt()
+        } else {
+            0.0
+        }
     }
 }
 
@@ -487,11 +512,11 @@ fn linearise(
     pose: &Isometry3<f64>,
     distance: f64,
     min_normal_cos: f64,
-) -> IcpSums {
+) -> PlaneSums {
     let loss = Loss::Cauchy {
         scale: distance / 3.0,
     };
-    let mut sums: IcpSums = accumulate(samples, |(p, own), acc: &mut IcpSums| {
+    let mut sums: PlaneSums = accumulate(samples, |(p, own), acc: &mut PlaneSums| {
         let q = pose * p;
         let Some((i, _)) = reference.nearest(&q, distance) else {
             return;
@@ -504,14 +529,7 @@ fn linearise(
                 return;
             }
         }
-        let r = n.dot(&(q - r_point));
-        let c = q.coords.cross(&n);
-        let j = Vector6::new(n.x, n.y, n.z, c.x, c.y, c.z);
-        acc.ne.add(r, &j, loss);
-        acc.matched += 1;
-        let w = loss.weight(r * r);
-        acc.squared += w * r * r;
-        acc.weight += w;
+        acc.add(n.dot(&(q - r_point)), &n, &q.coords, loss);
     });
     sums.ne.symmetrize();
     sums
@@ -689,11 +707,7 @@ fn summarise(
         converged,
         correspondences: sums.matched,
         fitness: sums.matched as f64 / samples.len().max(1) as f64,
-        rmse: if sums.weight > 0.0 {
-            (sums.squared / sums.weight).sqrt()
-        } else {
-            0.0
-        },
+        rmse: sums.rmse(),
         information,
         covariance,
     }

@@ -2,11 +2,12 @@
 //! perturbation, tangent `[rho; phi]` as in [`crate::lm`]), each source point paired with the
 //! nearest map point within the correspondence distance and weighted by a Cauchy loss.
 
-use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
 use super::voxel_map::VoxelMap;
 use crate::geometry::{se3_exp, se3_log};
-use crate::lm::{accumulate, Accumulator, Loss, NormalEquations};
+use crate::icp::PlaneSums;
+use crate::lm::{accumulate, Loss};
 
 /// Fewest correspondences a Gauss–Newton step is taken from (six unknowns).
 pub(crate) const MIN_CORRESPONDENCES: usize = 6;
@@ -26,25 +27,8 @@ pub(crate) struct Registration {
     pub(crate) correspondences: usize,
     /// Root-mean-square point-to-plane residual of the correspondences (metres, Cauchy-weighted).
     pub(crate) rmse: f64,
-    /// `J^T W J` at the solution.
+    /// `J^T W J` at the solution (tangent about the predicted sensor position).
     pub(crate) information: Matrix6<f64>,
-}
-
-#[derive(Debug, Clone, Copy, Default)]
-struct Sums {
-    ne: NormalEquations,
-    matched: usize,
-    squared: f64,
-    weight: f64,
-}
-
-impl Accumulator for Sums {
-    fn merge(&mut self, o: &Self) {
-        self.ne.merge(&o.ne);
-        self.matched += o.matched;
-        self.squared += o.squared;
-        self.weight += o.weight;
-    }
 }
 
 fn linearise(
@@ -53,22 +37,20 @@ fn linearise(
     pose: &Isometry3<f64>,
     distance: f64,
     kernel: f64,
-) -> Sums {
+    centre: &Vector3<f64>,
+) -> PlaneSums {
     let loss = Loss::Cauchy { scale: kernel };
-    let mut sums: Sums = accumulate(source, |p, acc: &mut Sums| {
+    let mut sums: PlaneSums = accumulate(source, |p, acc: &mut PlaneSums| {
         let q = pose * p;
         let Some(m) = map.nearest(&q, distance) else {
             return;
         };
-        let n = m.normal;
-        let r = n.dot(&(q - m.position));
-        let c = q.coords.cross(&n);
-        let j = Vector6::new(n.x, n.y, n.z, c.x, c.y, c.z);
-        acc.ne.add(r, &j, loss);
-        acc.matched += 1;
-        let w = loss.weight(r * r);
-        acc.squared += w * r * r;
-        acc.weight += w;
+        acc.add(
+            m.normal.dot(&(q - m.position)),
+            &m.normal,
+            &(q.coords - centre),
+            loss,
+        );
     });
     sums.ne.symmetrize();
     sums
@@ -89,7 +71,12 @@ pub(crate) fn register(
     let mut pose = *initial;
     let mut iterations = 0;
     let mut converged = false;
-    let mut sums = linearise(map, source, &pose, distance, kernel);
+    // Steps and the prior are taken about the predicted sensor position, not the world's origin
+    // (which may be a hundred metres away): there the rotation block of `J^T W J` measures the
+    // scan's own leverage, so the prior's weight means the same thing in every frame.
+    let centre = initial.translation.vector;
+    let about = Isometry3::from_parts(initial.translation, nalgebra::UnitQuaternion::identity());
+    let mut sums = linearise(map, source, &pose, distance, kernel, &centre);
     while iterations < max_iterations {
         if sums.matched < MIN_CORRESPONDENCES {
             return None;
@@ -101,7 +88,7 @@ pub(crate) fn register(
         };
         let (wt, wr) = (weight(0), weight(3));
         // The pose's offset from the prediction, in the left tangent: `pose = exp(d) initial`.
-        let d = se3_log(&(pose * initial.inverse()));
+        let d = se3_log(&(about.inverse() * pose * initial.inverse() * about));
         let mut damped = h;
         let mut gradient = sums.ne.gradient;
         for i in 0..6 {
@@ -110,9 +97,9 @@ pub(crate) fn register(
             gradient[i] += w * d[i];
         }
         let step = damped.cholesky()?.solve(&(-gradient));
-        pose = se3_exp(&step) * pose;
+        pose = about * se3_exp(&step) * about.inverse() * pose;
         iterations += 1;
-        sums = linearise(map, source, &pose, distance, kernel);
+        sums = linearise(map, source, &pose, distance, kernel, &centre);
         if step.norm() < tolerance {
             converged = true;
             break;
@@ -126,7 +113,7 @@ pub(crate) fn register(
         iterations,
         converged,
         correspondences: sums.matched,
-        rmse: (sums.squared / sums.weight.max(f64::MIN_POSITIVE)).sqrt(),
+        rmse: sums.rmse(),
         information: sums.ne.hessian,
     })
 }

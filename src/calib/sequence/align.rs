@@ -22,13 +22,13 @@
 //! The information matrix `J^T W J` says which directions the shared views constrain: the
 //! height is observed when the ground is in both sensors' frames, and not when it is not.
 
-use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Point3};
 use rustc_hash::FxHashMap;
 
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::{cell_key, se3_exp};
-use crate::icp::SurfaceCloud;
-use crate::lm::{accumulate, Accumulator, Loss, NormalEquations};
+use crate::icp::{PlaneSums, SurfaceCloud};
+use crate::lm::{accumulate, Loss};
 
 /// Ridge added to `J^T W J` relative to its largest diagonal entry, so an unobserved direction
 /// stays where the start put it instead of making the step singular.
@@ -167,34 +167,17 @@ fn target_samples(frames: &[Vec<Point3<f64>>], voxel: f64, stride: usize) -> Vec
     samples
 }
 
-#[derive(Debug, Clone, Copy, Default)]
-struct Sums {
-    ne: NormalEquations,
-    matched: usize,
-    squared: f64,
-    weight: f64,
-}
-
-impl Accumulator for Sums {
-    fn merge(&mut self, o: &Self) {
-        self.ne.merge(&o.ne);
-        self.matched += o.matched;
-        self.squared += o.squared;
-        self.weight += o.weight;
-    }
-}
-
 fn linearise(
     map: &SurfaceCloud,
     samples: &[Sample],
     poses: &[Isometry3<f64>],
     x: &Isometry3<f64>,
     distance: f64,
-) -> Sums {
+) -> PlaneSums {
     let loss = Loss::Cauchy {
         scale: distance / 3.0,
     };
-    let mut sums: Sums = accumulate(samples, |s, acc: &mut Sums| {
+    let mut sums: PlaneSums = accumulate(samples, |s, acc: &mut PlaneSums| {
         let Some(pose) = poses.get(s.frame) else {
             return;
         };
@@ -206,15 +189,10 @@ fn linearise(
         let (Some(n), Some(m)) = (map.normal(i), map.points().get(i)) else {
             return;
         };
-        let r = n.dot(&(w - m));
+        // The Jacobian of a left perturbation of `X` is that of `q = X p` against the normal
+        // seen from frame `k`.
         let nk = pose.rotation.inverse() * n;
-        let c = q.coords.cross(&nk);
-        acc.ne
-            .add(r, &Vector6::new(nk.x, nk.y, nk.z, c.x, c.y, c.z), loss);
-        acc.matched += 1;
-        let wgt = loss.weight(r * r);
-        acc.squared += wgt * r * r;
-        acc.weight += wgt;
+        acc.add(n.dot(&(w - m)), &nk, &q.coords, loss);
     });
     sums.ne.symmetrize();
     sums
@@ -292,7 +270,7 @@ pub fn align_to_map(
         correspondences: sums.matched,
         samples: samples.len(),
         fitness: sums.matched as f64 / samples.len().max(1) as f64,
-        rmse: (sums.squared / sums.weight.max(f64::MIN_POSITIVE)).sqrt(),
+        rmse: sums.rmse(),
         map_points: map.points().len(),
         information: sums.ne.hessian,
     })

@@ -52,6 +52,9 @@ pub const MAX_ROTATION_CHANGE: f64 = 0.035;
 /// alignment may move the hand-eye estimate: about five times what hand-eye is off by.
 pub const MAX_TRANSLATION_CHANGE: f64 = 0.3;
 
+/// A least-constrained direction and its share of the information.
+type Weakest = (Vector3<f64>, f64);
+
 /// Options of [`calibrate_sequence`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SequenceOptions {
@@ -155,9 +158,7 @@ fn check_frames(reference: &[Vec<Point3<f64>>], target: &[Vec<Point3<f64>>]) -> 
     Ok(())
 }
 
-fn refuse_unobserved(
-    alignment: &MapAlignment,
-) -> Result<((Vector3<f64>, f64), (Vector3<f64>, f64))> {
+fn refuse_unobserved(alignment: &MapAlignment) -> Result<(Weakest, Weakest)> {
     let info = &alignment.information;
     let translation = weakest_direction(&info.fixed_view::<3, 3>(0, 0).into_owned());
     let rotation = weakest_direction(&info.fixed_view::<3, 3>(3, 3).into_owned());
