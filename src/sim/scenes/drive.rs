@@ -51,7 +51,7 @@ use nalgebra::{Isometry3, Point3, Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::street::{STREET_FACADE_DISTANCE, STREET_HALF_WIDTH};
+use super::street::{clutter_shapes, STREET_FACADE_DISTANCE, STREET_HALF_WIDTH};
 use super::{pose, uniform};
 use crate::error::{Error, Result};
 use crate::sim::shapes::{Cuboid, Cylinder, IntensityRange, Rectangle, Shape};
@@ -616,16 +616,7 @@ fn town(rng: &mut ChaCha8Rng, route: &Route) -> Result<Vec<Shape>> {
             .iter()
             .map(|r| Shape::rectangle(*r, IntensityRange::WALL)),
     );
-    shapes.extend(
-        boxes
-            .iter()
-            .map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER)),
-    );
-    shapes.extend(
-        cylinders
-            .iter()
-            .map(|c| Shape::cylinder(*c, IntensityRange::POLE)),
-    );
+    shapes.extend(clutter_shapes(&boxes, &cylinders));
     Ok(shapes)
 }
 

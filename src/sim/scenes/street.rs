@@ -262,17 +262,23 @@ fn mount_sensors(
 /// The shapes in scan order: rectangles (the road ground-bright, the rest walls), boxes, poles.
 fn street_shapes(rectangles: &[Rectangle], boxes: &[Cuboid], cylinders: &[Cylinder]) -> Vec<Shape> {
     let mut shapes = rectangle_shapes(rectangles, 0);
-    shapes.extend(
-        boxes
-            .iter()
-            .map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER)),
-    );
-    shapes.extend(
-        cylinders
-            .iter()
-            .map(|c| Shape::cylinder(*c, IntensityRange::POLE)),
-    );
+    shapes.extend(clutter_shapes(boxes, cylinders));
     shapes
+}
+
+/// Parked cars (boxes) and then poles and trunks (cylinders) as shapes, with their intensities.
+pub(super) fn clutter_shapes<'a>(
+    boxes: &'a [Cuboid],
+    cylinders: &'a [Cylinder],
+) -> impl Iterator<Item = Shape> + 'a {
+    boxes
+        .iter()
+        .map(|b| Shape::cuboid(*b, IntensityRange::CLUTTER))
+        .chain(
+            cylinders
+                .iter()
+                .map(|c| Shape::cylinder(*c, IntensityRange::POLE)),
+        )
 }
 
 /// Scans the street with the roof HDL-64E (reference) and the wide-angle side unit (target).
