@@ -11,7 +11,8 @@ calibrated in four variants:
 * ``flat``: perfectly planar motion (the height is unobservable from motion: it must come from
   the ground both units see, or be refused);
 * ``no ground``: the ground's returns removed (nothing fixes the height: must be refused);
-* ``standing``: the first frame repeated (a standing vehicle: must be refused).
+* ``standing``: the first frame repeated (a standing vehicle: must be refused);
+* ``offset 1``: the target's frames one frame late (unsynchronized recordings: must be refused).
 
 It prints per variant: solved (within 0.2 deg / 3 cm), refused (and the kinds), wrong (any
 other returned result), the worst error, the odometry's end-point drift per distance, the stage
@@ -78,7 +79,7 @@ def main() -> None:
     stages: dict[str, list[float]] = collections.defaultdict(list)
     single = collections.Counter()
     for seed in range(args.start_seed, args.start_seed + args.seeds):
-        for variant in ("body", "flat", "no ground", "standing"):
+        for variant in ("body", "flat", "no ground", "standing", "offset 1"):
             drive = sim.drive_scene(
                 seed,
                 frames=args.frames,
@@ -88,6 +89,8 @@ def main() -> None:
             ref, tgt = drive.reference_frames, drive.target_frames
             if variant == "standing":
                 ref, tgt = [ref[0]] * len(ref), [tgt[0]] * len(tgt)
+            if variant == "offset 1":
+                ref, tgt = ref[:-1], tgt[1:]
             truth = drive.reference_from_target
             started = time.perf_counter()
             try:

@@ -107,3 +107,11 @@ def test_bad_input(drive) -> None:
         lidarcal.odometry([ref[0], ref[1][:10]])
     with pytest.raises(ValueError, match="seed"):
         lidarcal.calibrate_sequence(ref, tgt, seed=-1)
+
+
+def test_unsynchronized_frames_are_refused(drive) -> None:
+    # The target's frames one frame (0.7 m of driving) late: the map alignment would absorb it
+    # into the extrinsic; the gate against hand-eye refuses instead.
+    with pytest.raises(lidarcal.CalibrationError) as info:
+        lidarcal.calibrate_sequence(drive.reference_frames[:-1], drive.target_frames[1:])
+    assert info.value.kind in ("no_agreement", "unobservable")

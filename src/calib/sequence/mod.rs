@@ -274,7 +274,8 @@ pub fn calibrate_sequence(
             format!(
                 "the map alignment moved the hand-eye estimate by {:.2} degrees and {:.2} m (at \
                  most {:.1} degrees and {MAX_TRANSLATION_CHANGE} m expected): one of the two is \
-                 wrong",
+                 wrong; are the frames synchronized? (a time offset of one frame moves the \
+                 alignment by the distance driven in a frame)",
                 rotation.to_degrees(),
                 translation,
                 MAX_ROTATION_CHANGE.to_degrees()
