@@ -7,10 +7,10 @@
 //! 1. **Preprocess**: keep the returns within `[min_range, max_range]`; downsample to half a
 //!    map voxel (what the map receives) and that again to 1.5 voxels (what is registered).
 //! 2. **Predict** with constant velocity: the last motion applied once more.
-//! 3. **Register** the frame to the local map ([`registration`]): point-to-plane Gauss–Newton,
+//! 3. **Register** the frame to the local map (`registration.rs`): point-to-plane Gauss–Newton,
 //!    correspondences within three standard deviations of the prediction's past error
-//!    ([`threshold`]; never below `min_distance`), a Cauchy loss at a third of that.
-//! 4. **Update the map** ([`voxel_map`]): the frame's half-voxel points, with normals estimated
+//!    (`threshold.rs`; never below `min_distance`), a Cauchy loss at a third of that.
+//! 4. **Update the map** (`voxel_map.rs`): the frame's half-voxel points, with normals estimated
 //!    from their ten nearest neighbours in the frame, go into voxels that are not yet full;
 //!    voxels beyond `max_range` of the sensor are dropped.
 //!

@@ -1,7 +1,7 @@
 //! Map alignment: the extrinsic that puts the target's frames onto the map the reference built,
 //! both placed by the reference's odometry.
 //!
-//! Hand-eye calibration ([`super::hand_eye`]) leaves the extrinsic a tenth of a degree and a few
+//! Hand-eye calibration ([`hand_eye`](fn@super::hand_eye)) leaves the extrinsic a tenth of a degree and a few
 //! centimetres off with realistic odometry noise, and the height unobserved on flat ground. The
 //! two sensors do see the same facades, poles and cars, at different times: as the vehicle
 //! passes, what the front unit saw, the rear one sees a second or two later. So:
