@@ -15,7 +15,8 @@ pub(super) const SCENE_REFINE_ANGLE: f64 = 3.0 * std::f64::consts::PI / 180.0;
 /// ... and this translation (metres) of it, where the poles still fit ([`MAX_POLE_RMSE`]).
 pub(super) const SCENE_REFINE_DISTANCE: f64 = 0.2;
 
-/// The final check of the pole pose (`pole_rmse` is its per-pole RMS); when the check refuses
+/// The final check of the pole pose (`pole_rmse` is its per-pole RMS); when it passes, the pose
+/// `level` gives (the height from the ground) is taken if it passes too; when the check refuses
 /// it, the check's re-alignment on the whole scene is taken instead if it stays within
 /// [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`], the poles of `matches` still lie within
 /// [`MAX_POLE_RMSE`] of their axes and it passes the check (cylinder fits only). Returns the
@@ -25,6 +26,7 @@ pub(super) fn settle(
     matches: &[(usize, usize, i8)],
     pose: Isometry3<f64>,
     pole_rmse: Vec<f64>,
+    level: impl Fn(&Isometry3<f64>) -> Isometry3<f64>,
     options: &PoleOptions,
 ) -> Result<Settled> {
     // The poles hold the pose only as well as a few hundred tape points can: two near-parallel
@@ -39,12 +41,35 @@ pub(super) fn settle(
     let pair = PreparedPair::new(clouds.reference, clouds.target, &options.check)?;
     let first = pair.check(&pose)?;
     let settled = match first.refusal() {
-        None => Settled {
-            pose,
-            pole_rmse,
-            check: first,
-            scene_aligned: false,
-        },
+        None => {
+            // A pole pose that passes gets its height along the poles from the ground (step 6b)
+            // when the levelled pose passes too and the poles still fit there. Only then: a pole
+            // pose the check refused can sit closer to the ground's height and yet be off
+            // across the poles (two tuning scenes, 11 and 20 cm), which the scene's re-alignment
+            // below corrects and levelling would not.
+            let levelled = level(&pose);
+            let kept = Settled {
+                pose,
+                pole_rmse,
+                check: first,
+                scene_aligned: false,
+            };
+            if levelled == pose {
+                kept
+            } else {
+                let rms = per_pole_rms(clouds, matches, options.loss, &levelled)?;
+                let fits = rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE);
+                match pair.check(&levelled)? {
+                    c if fits && c.refusal().is_none() => Settled {
+                        pose: levelled,
+                        pole_rmse: rms,
+                        check: c,
+                        scene_aligned: false,
+                    },
+                    _ => kept,
+                }
+            }
+        }
         Some(refused) => {
             // A centroid line's residuals include the pole's thickness (up to 25 cm allowed):
             // they cannot tell whether the poles still fit, and the scene then moved one of 20
