@@ -17,7 +17,8 @@
 //! Poses are `world_from_sensor` with the world the sensor's first frame, so `poses[0]` is the
 //! identity. Everything is deterministic (fixed-order sums, no random choice).
 //!
-//! ```
+#![cfg_attr(feature = "sim", doc = "```")]
+#![cfg_attr(not(feature = "sim"), doc = "```ignore")]
 //! use lidarcal::odometry::{odometry, OdometryOptions};
 //! use lidarcal::sim::{scan, BeamModel, Preset, ScanOptions};
 //! use lidarcal::sim::scenes::{street_scene, StreetOptions};
