@@ -447,16 +447,22 @@ pub fn weakest_direction(block: &Matrix3<f64>) -> (Vector3<f64>, f64) {
     (eig.eigenvectors.column(k).into_owned(), share)
 }
 
+/// The weakest directions of a pose's information matrix (tangent `[rho; phi]`): the
+/// translation block's ([`weakest_direction`]) and the rotation block's.
+pub fn weakest_directions(information: &Matrix6<f64>) -> [(Vector3<f64>, f64); 2] {
+    [0, 3].map(|at| weakest_direction(&information.fixed_view::<3, 3>(at, at).into_owned()))
+}
+
 impl IcpResult {
     /// The least-constrained direction of translation (reference frame) and its share of the
     /// translation information (`0` = unconstrained, `1/3` = isotropic).
     pub fn weakest_translation(&self) -> (Vector3<f64>, f64) {
-        weakest_direction(&self.information.fixed_view::<3, 3>(0, 0).into_owned())
+        weakest_directions(&self.information)[0]
     }
 
     /// The least-constrained rotation axis and its share of the rotation information.
     pub fn weakest_rotation(&self) -> (Vector3<f64>, f64) {
-        weakest_direction(&self.information.fixed_view::<3, 3>(3, 3).into_owned())
+        weakest_directions(&self.information)[1]
     }
 }
 

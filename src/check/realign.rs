@@ -11,7 +11,7 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::geometry::{rotation_angle, se3_log};
-use crate::icp::{point_to_plane_icp_with_normals, weakest_direction, IcpOptions, IcpResult};
+use crate::icp::{point_to_plane_icp_with_normals, IcpOptions, IcpResult};
 
 /// A re-alignment that moved the pose this far or more (metres: half the 30 cm its gate starts
 /// from at the least) may have been stopped by its gate rather than by the scene, and is run
@@ -156,8 +156,8 @@ impl Correction {
                         icp.pose,
                         rotation_angle(&delta.rotation.to_rotation_matrix()),
                         (icp.pose.translation.vector - t.translation.vector).norm(),
-                        weakest_direction(&icp.information.fixed_view::<3, 3>(0, 0).into_owned()),
-                        weakest_direction(&icp.information.fixed_view::<3, 3>(3, 3).into_owned()),
+                        icp.weakest_translation(),
+                        icp.weakest_rotation(),
                         icp.covariance,
                     )
                 }

@@ -45,13 +45,13 @@ mod registration;
 mod threshold;
 mod voxel_map;
 
-use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::error::{ensure_finite, Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::cell_key;
 use crate::grid::NeighbourGrid;
-use crate::icp::weakest_direction;
+use crate::icp::weakest_directions;
 use registration::register;
 use rustc_hash::FxHashSet;
 use threshold::AdaptiveThreshold;
@@ -346,7 +346,6 @@ pub fn odometry(frames: &[Vec<Point3<f64>>], options: &OdometryOptions) -> Resul
                     &(last.inverse() * reg.pose),
                 );
                 distance += (reg.pose.translation.vector - last.translation.vector).norm();
-                let block: Matrix6<f64> = reg.information;
                 let report = FrameReport {
                     iterations: reg.iterations,
                     converged: reg.converged,
@@ -354,9 +353,7 @@ pub fn odometry(frames: &[Vec<Point3<f64>>], options: &OdometryOptions) -> Resul
                     source_points: source.len(),
                     rmse: reg.rmse,
                     distance: corr,
-                    weakest_translation: weakest_direction(
-                        &block.fixed_view::<3, 3>(0, 0).into_owned(),
-                    ),
+                    weakest_translation: weakest_directions(&reg.information)[0],
                 };
                 // Renormalized: the prediction multiplies a pose by the inverse of another (a
                 // conjugate, exact only for unit quaternions), so rounding would otherwise

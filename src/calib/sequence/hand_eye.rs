@@ -73,7 +73,7 @@ use nalgebra::{
 
 use crate::error::{ensure_finite, ensure_positive, Error, FailureKind, Result};
 use crate::geometry::{hat, orthonormal_basis, so3_left_jacobian_inverse, so3_log};
-use crate::icp::weakest_direction;
+use crate::icp::weakest_directions;
 use crate::kabsch::kabsch;
 use crate::lm::{self, LeastSquaresProblem, LmOptions, LmReport, Loss, NormalEquations};
 
@@ -661,6 +661,7 @@ pub fn hand_eye(pairs: &[MotionPair], options: &HandEyeOptions) -> Result<HandEy
     let mut data = problem.normal_equations(&x, true);
     data.symmetrize();
     let information = data.hessian;
+    let [weakest_translation, weakest_rotation] = weakest_directions(&information);
     Ok(HandEye {
         reference_from_target: x,
         information,
@@ -669,8 +670,8 @@ pub fn hand_eye(pairs: &[MotionPair], options: &HandEyeOptions) -> Result<HandEy
         pairs_used: motions.len(),
         inliers,
         unobserved_translation: unobserved,
-        weakest_rotation: weakest_direction(&information.fixed_view::<3, 3>(3, 3).into_owned()),
-        weakest_translation: weakest_direction(&information.fixed_view::<3, 3>(0, 0).into_owned()),
+        weakest_rotation,
+        weakest_translation,
         report,
     })
 }

@@ -32,7 +32,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
 use super::{Stopwatch, Timings};
 use crate::error::{Error, FailureKind, Result};
-use crate::icp::weakest_direction;
+use crate::icp::weakest_directions;
 use crate::odometry::{odometry, Odometry, OdometryOptions};
 
 /// Fewest synchronized frames of a drive.
@@ -159,9 +159,7 @@ fn check_frames(reference: &[Vec<Point3<f64>>], target: &[Vec<Point3<f64>>]) -> 
 }
 
 fn refuse_unobserved(alignment: &MapAlignment) -> Result<(Weakest, Weakest)> {
-    let info = &alignment.information;
-    let translation = weakest_direction(&info.fixed_view::<3, 3>(0, 0).into_owned());
-    let rotation = weakest_direction(&info.fixed_view::<3, 3>(3, 3).into_owned());
+    let [translation, rotation] = weakest_directions(&alignment.information);
     let (d, share) = translation;
     if share < MIN_ALIGNMENT_SHARE {
         let what = if d.z.abs() > 0.9 {

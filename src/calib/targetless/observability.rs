@@ -7,7 +7,7 @@ use nalgebra::{Matrix3, Vector3};
 use super::options::TargetlessOptions;
 use super::segment::PlaneFeature;
 use crate::error::{Error, FailureKind, Result};
-use crate::icp::{weakest_direction, IcpResult};
+use crate::icp::{weakest_direction, weakest_directions, IcpResult};
 use crate::lm::LmReport;
 
 /// The weakest directions of the final problem.
@@ -38,10 +38,10 @@ pub(super) fn observability(
     let plane_translation_share = weakest_direction(&plane_info).1;
     let (weakest_translation, weakest_rotation) = match (icp, report) {
         (Some(r), _) => (r.weakest_translation(), r.weakest_rotation()),
-        (None, Some(rep)) => (
-            weakest_direction(&rep.hessian.fixed_view::<3, 3>(0, 0).into_owned()),
-            weakest_direction(&rep.hessian.fixed_view::<3, 3>(3, 3).into_owned()),
-        ),
+        (None, Some(rep)) => {
+            let [translation, rotation] = weakest_directions(&rep.hessian);
+            (translation, rotation)
+        }
         (None, None) => ((Vector3::x(), 0.0), (Vector3::x(), 0.0)),
     };
     let source = if icp.is_some() {
