@@ -89,6 +89,16 @@ def result_attributes(result: Any) -> dict[str, Any]:
             icp_fitness=None if details.icp is None else details.icp["fitness"],
             weakest_translation_share=float(details.weakest_translation[1]),
         )
+    check = getattr(result, "check", None)
+    if check is not None:
+        values.update(
+            check_overlap=check.overlap,
+            check_agreement=[check.agreement, check.reverse_agreement],
+            check_violations=[check.violations, check.reverse_violations],
+            check_correction=[check.correction_rotation_deg, check.correction_translation_m],
+            check_gain=check.agreement_gain,
+            check_weakest_share=check.weakest_translation_share,
+        )
     plain = {name: _plain(value) for name, value in values.items()}
     return {name: value for name, value in plain.items() if value is not None}
 
