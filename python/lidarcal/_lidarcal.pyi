@@ -498,6 +498,7 @@ def calibrate_targetless(
     challenger_range: float | None = None,
     icp: bool | None = None,
     min_information_share: float | None = None,
+    min_agreement: float | None = None,
     ground_sweep: bool | None = None,
     refuse_ambiguous: bool | None = None,
     seed: int = 0,
@@ -506,7 +507,7 @@ def calibrate_targetless(
 
     Defaults (Rust ``TargetlessOptions::default()``): ``voxel_size=0.1``, ``max_planes=10``,
     ``max_translation=5``, ``challenger_range=2``, ``icp=True``, ``min_information_share=0.01``,
-    ``ground_sweep=True``, ``refuse_ambiguous=True``.
+    ``min_agreement=0.1``, ``ground_sweep=True``, ``refuse_ambiguous=True``.
     """
 
 def overlap(

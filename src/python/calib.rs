@@ -222,18 +222,20 @@ fn calibrate_poles(
 ///     better than the best within range the calibration is refused (ambiguous / out_of_range)
 ///     rather than answered with the best pose within range; 1.0 trusts the bound. icp: run the final
 ///     ICP. min_information_share: the weakest direction's share of the information below which
-///     the calibration is refused as unobservable. ground_sweep: also hypothesise from the
+///     the calibration is refused as unobservable. min_agreement: the share of the target points
+///     the best pose must bring within 25 cm of the reference (1.5 times it for a pose from the
+///     ground sweep), below which the calibration is refused as no agreement. ground_sweep: also hypothesise from the
 ///     largest plane of each cloud turned about its normal (no common plane pair needed).
 ///     refuse_ambiguous: raise when a distinct pose verifies almost as well as the best (else
 ///     return it with ambiguous=True).
 /// Left None, the keywords but distance_threshold and seed take the Rust
 ///     `TargetlessOptions::default()`: voxel_size=0.1, max_planes=10, max_translation=5,
-///     challenger_range=2, icp=True, min_information_share=0.01, ground_sweep=True,
-///     refuse_ambiguous=True.
+///     challenger_range=2, icp=True, min_information_share=0.01, min_agreement=0.1,
+///     ground_sweep=True, refuse_ambiguous=True.
 /// Raises CalibrationError naming why (too few planes, nothing verifies, an unconstrained
 /// direction such as the axis of a corridor).
 #[pyfunction]
-#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=None, max_planes=None, max_translation=None, challenger_range=None, icp=None, min_information_share=None, ground_sweep=None, refuse_ambiguous=None, seed=0))]
+#[pyo3(signature = (reference, target, *, distance_threshold=None, voxel_size=None, max_planes=None, max_translation=None, challenger_range=None, icp=None, min_information_share=None, min_agreement=None, ground_sweep=None, refuse_ambiguous=None, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate_targetless(
     py: Python<'_>,
@@ -246,6 +248,7 @@ fn calibrate_targetless(
     challenger_range: Option<f64>,
     icp: Option<bool>,
     min_information_share: Option<f64>,
+    min_agreement: Option<f64>,
     ground_sweep: Option<bool>,
     refuse_ambiguous: Option<bool>,
     #[pyo3(from_py_with = arrays::seed)] seed: u64,
@@ -263,6 +266,7 @@ fn calibrate_targetless(
         max_translation: max_translation.unwrap_or(d.max_translation),
         icp: icp.unwrap_or(d.icp),
         min_information_share: min_information_share.unwrap_or(d.min_information_share),
+        min_agreement: min_agreement.unwrap_or(d.min_agreement),
         seed,
         ..d
     };
@@ -573,6 +577,7 @@ pub(crate) fn defaults(out: &Bound<'_, PyDict>) -> PyResult<()> {
     t.set_item("challenger_range", o.challenger_range)?;
     t.set_item("icp", o.icp)?;
     t.set_item("min_information_share", o.min_information_share)?;
+    t.set_item("min_agreement", o.min_agreement)?;
     t.set_item("ground_sweep", o.ground_sweep)?;
     t.set_item("refuse_ambiguous", o.refuse_ambiguous)?;
 

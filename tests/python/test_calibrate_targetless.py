@@ -10,7 +10,7 @@ import pytest
 
 import lidarcal
 from eval_data import EVAL, require
-from lidarcal import sim
+from lidarcal import _lidarcal, sim
 
 DATA = EVAL / "SensorsCalibration"
 
@@ -235,6 +235,24 @@ def test_challenger_range_is_checked() -> None:
     for bad in (0.5, float("nan")):
         with pytest.raises(ValueError, match="challenger_range"):
             lidarcal.calibrate_targetless(scene.reference, scene.target, challenger_range=bad)
+
+
+def test_min_agreement_refuses_a_pose_that_explains_too_little() -> None:
+    scene = sim.street_scene(seed=0)
+    result = lidarcal.calibrate_targetless(scene.reference, scene.target)
+    agreement = result.details.agreement
+    assert agreement >= _lidarcal._defaults()["calibrate_targetless"]["min_agreement"]
+    # Asked for more common structure than the street's best pose brings, it refuses, naming the
+    # share it found.
+    floor = min(0.99, agreement + 0.05)
+    with pytest.raises(lidarcal.CalibrationError) as refused:
+        lidarcal.calibrate_targetless(scene.reference, scene.target, min_agreement=floor)
+    assert refused.value.kind == "no_agreement"
+    assert "too little common structure" in str(refused.value)
+    assert f"{100 * agreement:.1f} %" in str(refused.value)
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="min_agreement"):
+            lidarcal.calibrate_targetless(scene.reference, scene.target, min_agreement=bad)
 
 
 # Side units 3 m along the vehicle from the roof unit, with two planes per cloud (road and one

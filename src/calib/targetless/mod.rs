@@ -305,7 +305,13 @@ fn choose(
     let within = |v: &Verified| in_range(&v.pose, options.max_translation);
     let settled = settle_best(pool, &within, &|v| verifier.polish(v));
     let (winner, top, runner_up) = settled.ok_or_else(no_overlap)?;
-    ensure_best_acceptable(&top, runner_up.filter(within), checks, options)?;
+    ensure_best_acceptable(
+        &top,
+        winner.sweep,
+        runner_up.filter(within),
+        checks,
+        options,
+    )?;
     let samples = verifier.full_target_samples();
     let contest = Contest::new(top, samples, checks, options.max_translation);
     let contenders = pool.iter().map(|(_, v)| *v);
@@ -493,10 +499,17 @@ fn best_supported(candidates: &[Candidate], options: &TargetlessOptions) -> Vec<
         .collect()
 }
 
-/// `Err(Calibration)` when the best verified pose `top` brings nothing into agreement, or lies
+/// A pose from the ground sweep rests on one plane pair and ICP, with no second pair to
+/// corroborate it: it must bring this many times [`TargetlessOptions::min_agreement`] into
+/// agreement.
+const SWEEP_AGREEMENT_FACTOR: f64 = 1.5;
+
+/// `Err(Calibration)` when the best verified pose `top` brings nothing into agreement (or less
+/// than `min_agreement`, one and a half times that for a pose from the ground `sweep`), or lies
 /// beyond max_translation (`best_within`: the runner-up when it lies within range).
 fn ensure_best_acceptable(
     top: &Verified,
+    sweep: bool,
     best_within: Option<Verified>,
     checks: &LazyCheck<'_>,
     options: &TargetlessOptions,
@@ -515,6 +528,28 @@ fn ensure_best_acceptable(
         ));
     }
     let distance = top.pose.translation.vector.norm();
+    let floor = if sweep {
+        SWEEP_AGREEMENT_FACTOR * options.min_agreement
+    } else {
+        options.min_agreement
+    };
+    if distance <= options.max_translation && top.agreement < floor {
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            format!(
+                "too little common structure: the best verified pose{} brings only {:.1} % of \
+                 the target points within 25 cm of the reference (< {:.0} %), too few to tell \
+                 the true pose from a wrong one",
+                if sweep {
+                    ", from the ground sweep,"
+                } else {
+                    ""
+                },
+                100.0 * top.agreement,
+                100.0 * floor
+            ),
+        ));
+    }
     if distance <= options.max_translation {
         return Ok(());
     }
