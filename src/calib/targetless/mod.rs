@@ -84,7 +84,12 @@
 //!    corridor (floor and parallel walls) has none along its axis and is refused with that
 //!    direction named; so is a pose that only planes constrain when their normals span fewer than
 //!    three directions. It is also refused when ICP carried the target beyond
-//!    [`TargetlessOptions::max_translation`].
+//!    [`TargetlessOptions::max_translation`]. The result, once it passes the check, is refused
+//!    as ambiguous (with `refuse_ambiguous`) when a distinct verified contender scoring at least
+//!    half the best passes the check too, agrees on its overlap 10 points better both ways and
+//!    keeps the free space clearly clearer: the score, a share of all target points, can
+//!    prefer a wrong pose that overlaps more. The best verified pose is also refused when it
+//!    brings under [`TargetlessOptions::min_agreement`] of the target points into agreement.
 //!
 //! # Limits
 //! * Both sensors must see at least two common non-parallel planes (the ground and one facade
@@ -130,7 +135,7 @@ use self::hypotheses::{
 };
 use self::observability::{observability, Observability};
 use self::refine::{final_icp, refine_planes, PlaneRefinement};
-use self::rivals::{ambiguity_message, find_rival, Contest, LazyCheck, Rivalry};
+use self::rivals::{ambiguity_message, clearer_contender, find_rival, Contest, LazyCheck, Rivalry};
 use self::segment::{check_cloud, prepare, Prepared};
 use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
 
@@ -256,12 +261,18 @@ pub fn calibrate_targetless(
     let observed = observability(&matched, icp.as_ref(), refined.report.as_ref(), options)?;
     ensure_settled(&pose, icp.as_ref(), ambiguity, options)?;
     let check = checks.pair()?.certify(&pose)?;
+    let contenders = pool.iter().map(|(_, v)| *v);
+    let clearer = clearer_contender(&pose, &check, &top, contenders, &checks)?;
+    if let Some(rivalry) = clearer.filter(|_| options.refuse_ambiguous) {
+        let message = ambiguity_message(&top, &rivalry, options.max_translation);
+        return Err(Error::calibration(FailureKind::Ambiguous, message));
+    }
     let planes = matched_planes(&reference_ds, &target_ds, &refined, &pose);
     clock.lap("check");
     let counts = [enumerated, candidates.len(), chosen.len()];
     let clouds = [reference_ds, target_ds];
     let pairs = [planes.planes_reference, planes.planes_target];
-    let details = details(
+    let mut details = details(
         &choice,
         counts,
         &observed,
@@ -269,6 +280,7 @@ pub fn calibrate_targetless(
         pairs,
         (refined.report, icp),
     );
+    details.ambiguous |= clearer.is_some();
     Ok(TargetlessCalibration {
         reference_from_target: pose,
         initial_reference_from_target: choice.winner.pose,

@@ -5,7 +5,7 @@
 
 use std::cell::OnceCell;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::hypotheses::{in_range, same_pose, slide_peaks, SlideField};
 use super::segment::{PlaneFeature, Prepared};
@@ -307,6 +307,11 @@ pub(super) enum Rival {
     /// The best pose slid along its free direction, keeping the free space [`clearer`]
     /// ([`slid_rival`]): the shares of points the best pose and the slide put there.
     ClearerSlide { best_free: f64, free: f64 },
+    /// A distinct verified contender that ranks lower but passes the check, agrees on its
+    /// overlap clearly better both ways and keeps the free space [`clearer`]
+    /// ([`clearer_contender`]): the agreements (both ways) and free-space shares of the best
+    /// pose and of the contender.
+    ClearerContender { best: [f64; 3], other: [f64; 3] },
     /// The best pose slid along its free direction, which the check cannot tell from it
     /// ([`slid_rival`]).
     Slide,
@@ -370,6 +375,62 @@ pub(super) fn contender_rival(
         runner_up,
         rival: None,
     })
+}
+
+/// A contender scoring at least this share of the best pose is judged by
+/// [`clearer_contender`] ...
+const CLEARER_CONTENDER_RATIO: f64 = 0.5;
+/// ... and must agree on its overlap, both ways, at least this much better than the best pose.
+const CLEARER_AGREEMENT_MARGIN: f64 = 0.1;
+
+/// The first distinct contender (best first, at most [`MAX_POLISHED`] checked) that the check
+/// prefers to the result although the verification ranks it lower: it scores at least
+/// [`CLEARER_CONTENDER_RATIO`] of the best verified pose `best`, passes the check, agrees on its
+/// overlap both ways [`CLEARER_AGREEMENT_MARGIN`] better than the result (`result`, its check
+/// `report`), and keeps the free space [`clearer`]. The score is a share of all target points,
+/// so a wrong pose that overlaps more can outscore the truth: for two sensors 7.4 m apart (hard
+/// case partial_28) a pose turned 87 degrees scored 0.167 against the truth's 0.122, with 44 % /
+/// 53 % of its overlap in agreement and 6.2 % of the points in free space, the truth 82 % / 73 %
+/// and none. Only a result that puts more than [`SLID_FREE_SPACE_MIN`] of the points into free
+/// space is questioned.
+pub(super) fn clearer_contender(
+    result: &Isometry3<f64>,
+    report: &CheckReport,
+    best: &Verified,
+    contenders: impl Iterator<Item = Verified>,
+    checks: &LazyCheck<'_>,
+) -> Result<Option<Rivalry>> {
+    let best_free = free_share(report);
+    if best_free <= SLID_FREE_SPACE_MIN {
+        return Ok(None);
+    }
+    let floor = CLEARER_CONTENDER_RATIO * best.score;
+    let mut ranked: Vec<Verified> = contenders.filter(|v| v.score >= floor).collect();
+    ranked.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut seen = vec![*result, best.pose];
+    for v in ranked {
+        if seen.len() > MAX_POLISHED + 1 {
+            break;
+        }
+        if seen
+            .iter()
+            .any(|p| same_pose(p, &v.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+        {
+            continue;
+        }
+        seen.push(v.pose);
+        let c = checks.pair()?.check(&v.pose)?;
+        let better = c.agreement >= report.agreement + CLEARER_AGREEMENT_MARGIN
+            && c.reverse_agreement >= report.reverse_agreement + CLEARER_AGREEMENT_MARGIN;
+        if c.verdict == Verdict::Consistent && better && clearer(free_share(&c), best_free) {
+            let rival = Rival::ClearerContender {
+                best: [report.agreement, report.reverse_agreement, best_free],
+                other: [c.agreement, c.reverse_agreement, free_share(&c)],
+            };
+            return Ok(Some(Rivalry::of(v, rival)));
+        }
+    }
+    Ok(None)
 }
 
 /// The scene's own half-turn symmetries ([`half_turns`] of the reference's planes) applied to
@@ -524,7 +585,7 @@ pub(super) fn ambiguity_message(
                 angle.to_degrees()
             );
         }
-        Some(Rival::Tie) | None => {}
+        Some(Rival::Tie | Rival::ClearerContender { .. }) | None => {}
     }
     let beyond = runner_up
         .filter(|r| r.pose.translation.vector.norm() > max_translation)
@@ -534,6 +595,22 @@ pub(super) fn ambiguity_message(
                 r.pose.translation.vector.norm()
             )
         });
+    if let Some(Rival::ClearerContender { best, other }) = rivalry.rival {
+        return format!(
+            "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower (scores \
+             {second_score:.3} and {best_score:.3}{beyond}) but fits where the clouds overlap \
+             clearly better (agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %) and keeps the \
+             free space clearer ({:.1} % against {:.1} %): the best pose may owe its score to a \
+             larger, wrong overlap; add structure both sensors see",
+            angle.to_degrees(),
+            100.0 * other[0],
+            100.0 * other[1],
+            100.0 * best[0],
+            100.0 * best[1],
+            100.0 * other[2],
+            100.0 * best[2]
+        );
+    }
     format!(
         "ambiguous: two poses {:.1} deg and {:.2} m apart verify almost equally well \
          (scores {best_score:.3} and {second_score:.3}{beyond}; a symmetric scene such as a \
@@ -581,6 +658,17 @@ mod tests {
         });
         let clearer = ambiguity_message(&best, &rivalry, 5.0);
         assert!(clearer.contains("(0.6 % against 1.6 %)"), "{clearer}");
+        rivalry.rival = Some(Rival::ClearerContender {
+            best: [0.44, 0.53, 0.062],
+            other: [0.77, 0.70, 0.02],
+        });
+        let contender = ambiguity_message(&best, &rivalry, 5.0);
+        assert!(
+            contender.contains("ranks lower (scores 0.339 and 0.552; the other puts the target 6.02 m away, beyond max_translation)")
+                && contender.contains("(agreement 77 % / 70 % against 44 % / 53 %)")
+                && contender.contains("(2.0 % against 6.2 %)"),
+            "{contender}"
+        );
     }
 
     #[test]
