@@ -545,24 +545,24 @@ fn ensure_best_acceptable(
     } else {
         options.min_agreement
     };
-    if distance <= options.max_translation && top.agreement < floor {
-        return Err(Error::calibration(
-            FailureKind::NoAgreement,
-            format!(
-                "too little common structure: the best verified pose{} brings only {:.1} % of \
-                 the target points within 25 cm of the reference (< {:.0} %), too few to tell \
-                 the true pose from a wrong one",
-                if sweep {
-                    ", from the ground sweep,"
-                } else {
-                    ""
-                },
-                100.0 * top.agreement,
-                100.0 * floor
-            ),
-        ));
-    }
     if distance <= options.max_translation {
+        if top.agreement < floor {
+            return Err(Error::calibration(
+                FailureKind::NoAgreement,
+                format!(
+                    "too little common structure: the best verified pose{} brings only {:.1} % \
+                     of the target points within 25 cm of the reference (< {:.0} %), too few to \
+                     tell the true pose from a wrong one",
+                    if sweep {
+                        ", from the ground sweep,"
+                    } else {
+                        ""
+                    },
+                    100.0 * top.agreement,
+                    100.0 * floor
+                ),
+            ));
+        }
         return Ok(());
     }
     // A challenger that fails the check itself says only that nothing fits (a cloud with no real

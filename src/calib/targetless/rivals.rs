@@ -409,7 +409,8 @@ pub(super) fn clearer_contender(
     ranked.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut seen = vec![*result, best.pose];
     for v in ranked {
-        if seen.len() > MAX_POLISHED + 1 {
+        // The result and the best verified pose, then at most MAX_POLISHED contenders.
+        if seen.len() == MAX_POLISHED + 2 {
             break;
         }
         if seen
@@ -555,6 +556,14 @@ pub(super) fn ambiguity_message(
     let (angle, distance) = runner_up.map_or((0.0, 0.0), |r| pose_error(&r.pose, &best.pose));
     const REPEATS: &str = "the scene may repeat itself along that direction (a colonnade, a row \
                            of posts or boxes): add structure that breaks the repetition";
+    let beyond = runner_up
+        .filter(|r| r.pose.translation.vector.norm() > max_translation)
+        .map_or(String::new(), |r| {
+            format!(
+                "; the other puts the target {:.2} m away, beyond max_translation",
+                r.pose.translation.vector.norm()
+            )
+        });
     match rivalry.rival {
         Some(Rival::ClearerSlide { best_free, free }) => {
             return format!(
@@ -585,31 +594,23 @@ pub(super) fn ambiguity_message(
                 angle.to_degrees()
             );
         }
-        Some(Rival::Tie | Rival::ClearerContender { .. }) | None => {}
-    }
-    let beyond = runner_up
-        .filter(|r| r.pose.translation.vector.norm() > max_translation)
-        .map_or(String::new(), |r| {
-            format!(
-                "; the other puts the target {:.2} m away, beyond max_translation",
-                r.pose.translation.vector.norm()
-            )
-        });
-    if let Some(Rival::ClearerContender { best, other }) = rivalry.rival {
-        return format!(
-            "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower (scores \
-             {second_score:.3} and {best_score:.3}{beyond}) but fits where the clouds overlap \
-             clearly better (agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %) and keeps the \
-             free space clearer ({:.1} % against {:.1} %): the best pose may owe its score to a \
-             larger, wrong overlap; add structure both sensors see",
-            angle.to_degrees(),
-            100.0 * other[0],
-            100.0 * other[1],
-            100.0 * best[0],
-            100.0 * best[1],
-            100.0 * other[2],
-            100.0 * best[2]
-        );
+        Some(Rival::ClearerContender { best, other }) => {
+            return format!(
+                "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower (scores \
+                 {second_score:.3} and {best_score:.3}{beyond}) but fits where the clouds overlap \
+                 clearly better (agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %) and keeps the \
+                 free space clearer ({:.1} % against {:.1} %): the best pose may owe its score to a \
+                 larger, wrong overlap; add structure both sensors see",
+                angle.to_degrees(),
+                100.0 * other[0],
+                100.0 * other[1],
+                100.0 * best[0],
+                100.0 * best[1],
+                100.0 * other[2],
+                100.0 * best[2]
+            );
+        }
+        Some(Rival::Tie) | None => {}
     }
     format!(
         "ambiguous: two poses {:.1} deg and {:.2} m apart verify almost equally well \
