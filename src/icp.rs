@@ -166,16 +166,14 @@ fn group_by_key<K: std::hash::Hash + Eq>(
     owners: bool,
     key_of: impl Fn(&Point3<f64>) -> Result<Option<K>>,
 ) -> Result<Option<(Vec<(Vector3<f64>, usize)>, Vec<usize>)>> {
-    // Room for a voxel in two points (sparse scans come close: the Hesai P64's 106k points make
-    // 75k voxels, and growing the map from less took a fifth longer), but not for more than
-    // 2^17 voxels: a 1M-point scan's map then starts at 4.5 instead of 18 MB and grows only
-    // if it needs to.
+    // Room for a voxel per point, as many as a sparse scan can have (the Hesai P64's 106k points
+    // make 75k voxels): growing the map and the sums from half that made this 4x slower (6 vs
+    // 1.5 ms), most of it reallocating. But not for more than 2^17 voxels: a 1M-point scan's
+    // map then starts at 4.5 instead of 36 MB and grows only if it needs to.
+    let capacity = points.len().min(MAX_VOXEL_CAPACITY);
     let mut index: rustc_hash::FxHashMap<K, usize> =
-        rustc_hash::FxHashMap::with_capacity_and_hasher(
-            (points.len() / 2).min(MAX_VOXEL_CAPACITY),
-            Default::default(),
-        );
-    let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new();
+        rustc_hash::FxHashMap::with_capacity_and_hasher(capacity, Default::default());
+    let mut sums: Vec<(Vector3<f64>, usize)> = Vec::with_capacity(capacity);
     let mut owner = Vec::with_capacity(if owners { points.len() } else { 0 });
     for p in points {
         let Some(key) = key_of(p)? else {

@@ -19,16 +19,19 @@ impl Side {
     /// The median local thickness of the sampled points that lie on a surface (metres; 0 when
     /// none does).
     pub(super) fn thickness(&self) -> f64 {
-        let mut values: Vec<f64> = (0..self.surface.points().len())
-            .step_by(
-                self.surface
-                    .points()
-                    .len()
-                    .div_ceil(THICKNESS_SAMPLES)
-                    .max(1),
-            )
-            .filter_map(|i| self.surface.thickness(i))
-            .collect();
+        let n = self.surface.points().len();
+        let stride = n.div_ceil(THICKNESS_SAMPLES).max(1);
+        let thickness = |k: usize| self.surface.thickness(k * stride);
+        let samples = n.div_ceil(stride);
+        // Each sample is independent and the median does not depend on their order: in
+        // parallel (a millisecond or two of a check's preparation on a 75k-voxel scan).
+        #[cfg(feature = "parallel")]
+        let mut values: Vec<f64> = {
+            use rayon::prelude::*;
+            (0..samples).into_par_iter().filter_map(thickness).collect()
+        };
+        #[cfg(not(feature = "parallel"))]
+        let mut values: Vec<f64> = (0..samples).filter_map(thickness).collect();
         median(&mut values)
     }
 
