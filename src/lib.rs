@@ -166,6 +166,20 @@ where
     }
 }
 
+/// `f` over `items`, in order, on rayon's pool with the `parallel` feature (one after the other
+/// without it); the results do not depend on which.
+pub(crate) fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync + Send) -> Vec<U> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter().map(f).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter().map(f).collect()
+    }
+}
+
 /// The README's Rust examples, compiled and run as doctests so they cannot rot. They use the
 /// simulator, so they run with feature `sim` (a default feature).
 #[doc = include_str!("../README.md")]

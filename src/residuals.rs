@@ -138,14 +138,7 @@ impl PointToPlane {
             |g: &PlaneGroup| reweighted_group(&g.plane, g.frame, g.points.iter(), pose, self.loss);
         // Groups are independent: in parallel, each summed in order, so the result is the same
         // for any thread count.
-        #[cfg(feature = "parallel")]
-        let groups = {
-            use rayon::prelude::*;
-            self.groups.par_iter().map(weigh).collect()
-        };
-        #[cfg(not(feature = "parallel"))]
-        let groups = self.groups.iter().map(weigh).collect();
-        PlaneMomentsProblem::new(groups)
+        PlaneMomentsProblem::new(crate::par_map(&self.groups, weigh))
     }
 
     /// Residual and Jacobian row of every point, group after group (for checks and diagnostics).

@@ -139,14 +139,7 @@ impl Reweighting for InlierPlanes<'_> {
             let points = indices.iter().filter_map(|&i| cloud.get(i));
             reweighted_group(&plane, frame, points, pose, self.loss)
         };
-        #[cfg(feature = "parallel")]
-        let groups = {
-            use rayon::prelude::*;
-            self.groups.par_iter().map(weigh).collect()
-        };
-        #[cfg(not(feature = "parallel"))]
-        let groups = self.groups.iter().map(weigh).collect();
-        PlaneMomentsProblem::new(groups)
+        PlaneMomentsProblem::new(crate::par_map(&self.groups, weigh))
     }
 
     fn cost(&self, pose: &Isometry3<f64>) -> f64 {

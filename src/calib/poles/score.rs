@@ -63,13 +63,7 @@ impl<'a> Scorer<'a> {
     /// Every base match of [`base_matches`] solved, refined and scored (in parallel with the
     /// `parallel` feature); the first error in enumeration order is returned.
     pub(super) fn score_all(&self, bases: &[[(usize, usize, i8); 2]]) -> Result<Scored> {
-        #[cfg(feature = "parallel")]
-        let evaluated: Vec<_> = {
-            use rayon::prelude::*;
-            bases.par_iter().map(|b| self.evaluate(b)).collect()
-        };
-        #[cfg(not(feature = "parallel"))]
-        let evaluated: Vec<_> = bases.iter().map(|b| self.evaluate(b)).collect();
+        let evaluated = crate::par_map(bases, |b| self.evaluate(b));
         let mut hypotheses = Vec::with_capacity(evaluated.len());
         let mut starts = Vec::with_capacity(evaluated.len());
         let mut reports = Vec::with_capacity(evaluated.len());

@@ -457,17 +457,10 @@ pub(super) fn slides(
             ..*c
         })
     };
-    let slid: Vec<Candidate> = {
-        #[cfg(feature = "parallel")]
-        {
-            use rayon::prelude::*;
-            candidates.par_iter().filter_map(best_slide).collect()
-        }
-        #[cfg(not(feature = "parallel"))]
-        {
-            candidates.iter().filter_map(best_slide).collect()
-        }
-    };
+    let slid: Vec<Candidate> = crate::par_map(candidates, best_slide)
+        .into_iter()
+        .flatten()
+        .collect();
     // Pair hypotheses that differ only along their free direction slide to the same pose.
     deduplicate(slid)
 }

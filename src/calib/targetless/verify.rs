@@ -280,19 +280,6 @@ impl<'a> Verifier<'a> {
     }
 }
 
-/// `f` over `items`, on rayon's pool with the `parallel` feature.
-fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync + Send) -> Vec<U> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        items.par_iter().map(f).collect()
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        items.iter().map(f).collect()
-    }
-}
-
 /// The verification (step 4) of `chosen` hypotheses: every one screened, the best
 /// [`SCREEN_KEEP`] distinct screened poses verified. The verified poses best first, each with
 /// the hypothesis it grew from.
@@ -300,7 +287,7 @@ pub(super) fn verify_hypotheses(
     verifier: &Verifier<'_>,
     chosen: &[Candidate],
 ) -> Vec<(Candidate, Verified)> {
-    let screened: Vec<Option<Verified>> = par_map(chosen, |c| verifier.screen(c));
+    let screened: Vec<Option<Verified>> = crate::par_map(chosen, |c| verifier.screen(c));
     let mut kept: Vec<(usize, Isometry3<f64>)> = Vec::new();
     for (k, _) in rank(&screened) {
         if kept.len() >= SCREEN_KEEP {
@@ -316,7 +303,7 @@ pub(super) fn verify_hypotheses(
             kept.push((k, v.pose));
         }
     }
-    let verified: Vec<Option<Verified>> = par_map(&kept, |(_, pose)| verifier.verify(pose));
+    let verified: Vec<Option<Verified>> = crate::par_map(&kept, |(_, pose)| verifier.verify(pose));
     rank(&verified)
         .iter()
         .filter_map(|&(k, _)| {
