@@ -43,7 +43,7 @@ pub(super) const SLIDE_SAMPLES: usize = 400;
 /// Offsets closer than this to the hypothesis' own (metres) are left to its screening ICP.
 const SLIDE_MIN: f64 = 0.75;
 /// Local maxima of the slide score of the best pose probed for a repeated structure (see
-/// [`calibrate_targetless`]).
+/// [`calibrate_targetless`](super::calibrate_targetless)).
 pub(super) const SLIDE_PEAKS: usize = 2;
 
 /// A candidate transform from plane correspondences.
