@@ -404,6 +404,7 @@ impl PreparedPair {
             aligned: correction.aligned,
             correction_rotation: correction.rotation,
             correction_translation: correction.translation,
+            correction_counted: icp.is_some() && counted.realign_violations.is_none(),
             weakest_translation: correction.weakest_translation,
             weakest_rotation: correction.weakest_rotation,
             detectable_rotation: detectable.rotation,

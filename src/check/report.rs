@@ -69,6 +69,10 @@ pub struct CheckReport {
     pub correction_rotation: f64,
     /// Translation between the given pose and `aligned` (metres).
     pub correction_translation: f64,
+    /// Whether the correction (and the agreement gain) counted as evidence: false when the
+    /// re-aligned pose puts clearly more points into the other sensor's free space than the
+    /// given one, or when there was no re-alignment.
+    pub correction_counted: bool,
     /// The least-constrained translation direction (reference frame) and its share of the
     /// translation information (`1/3` when isotropic, `0` when unconstrained).
     pub weakest_translation: (Vector3<f64>, f64),
