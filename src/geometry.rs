@@ -293,6 +293,17 @@ impl Plane {
         self.normal.dot(&p.coords) + self.offset
     }
 
+    /// The point where three planes meet, `None` when their normals are linearly dependent (two
+    /// parallel planes, or three sharing a line's direction).
+    pub fn common_point(planes: &[Plane; 3]) -> Option<Point3<f64>> {
+        let [a, b, c] = planes.map(|p| p.normal.into_inner().transpose());
+        let rhs = Vector3::new(-planes[0].offset, -planes[1].offset, -planes[2].offset);
+        Matrix3::from_rows(&[a, b, c])
+            .lu()
+            .solve(&rhs)
+            .map(Point3::from)
+    }
+
     /// The orthogonal projection of `p` onto the plane.
     pub fn project(&self, p: &Point3<f64>) -> Point3<f64> {
         p - self.normal.into_inner() * self.signed_distance(p)

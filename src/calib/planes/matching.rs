@@ -40,10 +40,7 @@ pub(super) fn check_conditioning(planes: &[Plane; 3], which: &str) -> Result<()>
 
 /// The point where three planes meet.
 pub(super) fn corner(planes: &[Plane; 3]) -> Result<Point3<f64>> {
-    let [a, b, c] = normals(planes);
-    let m = Matrix3::from_rows(&[a.transpose(), b.transpose(), c.transpose()]);
-    let rhs = Vector3::new(-planes[0].offset, -planes[1].offset, -planes[2].offset);
-    m.lu().solve(&rhs).map(Point3::from).ok_or_else(|| {
+    Plane::common_point(planes).ok_or_else(|| {
         Error::calibration(
             FailureKind::TooFewFeatures,
             "the three planes do not meet in a point",

@@ -62,14 +62,15 @@
 //!    twin: consistent, agreeing within 2 points both ways, at most 2 points more of the points
 //!    in free space). When the three largest reference planes make a square corner (no two
 //!    normals more than 20 degrees from perpendicular) and the best pose puts over 1 % of the
-//!    points into free space, the best pose is also turned a third of a
-//!    turn either way about each of the corner's four diagonals, through the point where the
-//!    planes meet: such a turn maps the three planes onto one another. Any symmetry turn that
-//!    passes the check and puts at most half as many points there as the best pose (when that
-//!    is over 1 %) makes the result ambiguous too. The best pose slid along its plane pair's
-//!    free direction to the other peaks of the slide score is probed the same way when it puts
-//!    over 1 % of the points into free space: a slide that keeps the free space clearly clearer, or that the check cannot tell
-//!    from the best pose, makes it ambiguous (a colonnade or a row of boxes one period off).
+//!    points into free space, the best pose is also turned a third of a turn either way about
+//!    each of the corner's four diagonals, through the point where the planes meet: such a turn
+//!    maps the three planes onto one another. Any symmetry turn that passes the check and puts
+//!    at most half as many points there as the best pose (when that is over 1 %) makes the
+//!    result ambiguous too. The best pose slid along its plane pair's free direction to the
+//!    other peaks of the slide score is probed the same way when it puts over 1 % of the points
+//!    into free space: a slide that keeps the free space clearly clearer, or that the check
+//!    cannot tell from the best pose, makes it ambiguous (a colonnade or a row of boxes one
+//!    period off).
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the

@@ -269,11 +269,16 @@ impl<'a> Contest<'a> {
         let Some(best_free) = self.best_free()? else {
             return Ok(None);
         };
-        if !self.within(v) || pose_error(&v.pose, &self.best.pose).0 < RULED_OUT_TURN {
+        // A tie that is no rival was ruled out, which for a turn this large means the check
+        // does not pass it: neither a twin nor clearer, and not worth a second check.
+        if self.ties(v)
+            || !self.within(v)
+            || pose_error(&v.pose, &self.best.pose).0 < RULED_OUT_TURN
+        {
             return Ok(None);
         }
         let c = self.checks.pair()?.check(&v.pose)?;
-        if !self.ties(v) && self.indistinguishable(&c)? {
+        if self.indistinguishable(&c)? {
             return Ok(Some(Rival::HalfTurn));
         }
         let free = free_share(&c);

@@ -1,10 +1,11 @@
 //! The scene's own half-turn symmetries (a corridor or room turned about its axes), probed around
 //! the best pose: a rival the hypotheses may never reach.
 
-use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use super::segment::PlaneFeature;
 use super::verify::DISTINCT_DISTANCE;
+use crate::geometry::Plane;
 
 /// Largest reference planes whose normals (and the lines they share) give the half turns of
 /// [`half_turns`].
@@ -104,22 +105,18 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
 /// degrees apart) came back turned 120 degrees and 2.5 m off, passing the check with 18.6 % of
 /// its points in free space; the truth, a third turn of it, puts 3.0 % there.
 pub(super) fn third_turns(features: &[PlaneFeature]) -> Vec<Isometry3<f64>> {
-    let normals = largest_normals(features);
-    let [a, b, c] = normals.as_slice() else {
+    let [fa, fb, fc, ..] = features else {
         return Vec::new();
     };
-    if a.dot(b).abs().max(a.dot(c).abs()).max(b.dot(c).abs()) > MAX_CORNER_COSINE {
+    let planes = [fa.plane, fb.plane, fc.plane];
+    let [a, b, c] = planes.map(|p| p.normal.into_inner());
+    if a.dot(&b).abs().max(a.dot(&c).abs()).max(b.dot(&c).abs()) > MAX_CORNER_COSINE {
         return Vec::new();
     }
-    let offsets: Vec<f64> = features
-        .iter()
-        .take(SYMMETRY_PLANES)
-        .map(|f| -f.plane.offset)
-        .collect();
-    let m = Matrix3::from_rows(&[a.transpose(), b.transpose(), c.transpose()]);
-    let Some(corner) = m.lu().solve(&Vector3::from_column_slice(&offsets)) else {
+    let Some(corner) = Plane::common_point(&planes) else {
         return Vec::new();
     };
+    let corner = corner.coords;
     let mut turns = Vec::with_capacity(8);
     for (sb, sc) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
         let axis = Unit::new_normalize(a + b * sb + c * sc);
