@@ -16,8 +16,9 @@ pub(super) const MIN_AXIS_NORM: f64 = 0.2;
 /// Axes closer than this (the cosine of 10 degrees) are one.
 pub(super) const SAME_AXIS_COSINE: f64 = 0.985;
 
-/// The three largest reference planes make a square corner for [`third_turns`] when no two of
-/// their normals are further than this from perpendicular (the cosine of 70 degrees).
+/// The largest reference planes of three directions make a square corner for [`third_turns`]
+/// when no two of their normals are further than this from perpendicular (the cosine of 70
+/// degrees).
 pub(super) const MAX_CORNER_COSINE: f64 = 0.34;
 
 /// Adds the direction of `a` to `axes` unless it is too short (a cross product of two planes
@@ -98,14 +99,31 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
 }
 
 /// Turns of a third (120 degrees either way) about the four diagonals of a square corner, through
-/// the point where its three planes meet, when the [`SYMMETRY_PLANES`] largest reference planes
-/// make one ([`MAX_CORNER_COSINE`]); none otherwise. Such a turn maps the corner's three planes
+/// the point where its three planes meet, when the largest reference planes of three directions
+/// (each more than 10 degrees from the others) make one ([`MAX_CORNER_COSINE`]); none otherwise. Such a turn maps the corner's three planes
 /// onto one another: a cube corner matched plane for plane in the wrong cyclic order. Seen by
 /// one sensor on its side, a fresh corner of the adversarial suite (corner 9066, walls 90.7
 /// degrees apart) came back turned 120 degrees and 2.5 m off, passing the check with 18.6 % of
 /// its points in free space; the truth, a third turn of it, puts 3.0 % there.
 pub(super) fn third_turns(features: &[PlaneFeature]) -> Vec<Isometry3<f64>> {
-    let [fa, fb, fc, ..] = features else {
+    // The largest planes of three directions: a plane parallel to a larger one (a pavement
+    // beside the road, the face of a box before a wall) is another surface of the same side of
+    // the corner. Of a fresh corner seen by a sensor on its side (adversarial 11070, returned
+    // turned 120 degrees) the third largest reference plane lay parallel to the second.
+    let mut chosen: Vec<&PlaneFeature> = Vec::with_capacity(3);
+    for f in features {
+        let n = f.plane.normal;
+        if chosen
+            .iter()
+            .all(|c| c.plane.normal.dot(&n).abs() < SAME_AXIS_COSINE)
+        {
+            chosen.push(f);
+        }
+        if chosen.len() == 3 {
+            break;
+        }
+    }
+    let [fa, fb, fc] = chosen[..] else {
         return Vec::new();
     };
     let planes = [fa.plane, fb.plane, fc.plane];
@@ -240,5 +258,21 @@ mod tests {
         .is_empty());
         // Fewer than three planes: none either.
         assert!(third_turns(&features[..2]).is_empty());
+        // A plane parallel to a larger one (a pavement beside the road) is passed over for the
+        // next direction: the same corner, the same turns.
+        let pavement = feature(Vector3::z(), -Vector3::z().dot(&corner.coords) + 0.15);
+        let with_pavement = [
+            features[2].clone(),
+            pavement.clone(),
+            features[0].clone(),
+            features[1].clone(),
+        ];
+        let again = third_turns(&with_pavement);
+        assert_eq!(again.len(), 8);
+        for turn in &again {
+            assert!((turn * corner - corner).norm() < 1e-9);
+        }
+        // Only two directions among the planes: none.
+        assert!(third_turns(&[features[0].clone(), pavement, features[2].clone()]).is_empty());
     }
 }
