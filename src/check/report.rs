@@ -91,7 +91,27 @@ pub struct CheckReport {
     pub failure: Option<FailureKind>,
 }
 
+/// A pose that puts the share `free` of the points into the other sensor's free space is clearly
+/// clearer than one that puts `other` ([`clearer`]) when `other` exceeds this share ...
+pub(crate) const CLEARER_FREE_MIN: f64 = 0.01;
+/// ... and `free` is at most this fraction of it.
+pub(crate) const CLEARER_FREE_RATIO: f64 = 0.5;
+
+/// Whether a pose that puts the share `free` of the points into the other sensor's free space
+/// (the larger of the two ways, [`CheckReport::free_share`]) keeps it clearly clearer than one
+/// that puts `other`: `other` above [`CLEARER_FREE_MIN`] and `free` at most
+/// [`CLEARER_FREE_RATIO`] of it. Methods choosing between poses that both pass the check use it.
+pub(crate) fn clearer(free: f64, other: f64) -> bool {
+    other > CLEARER_FREE_MIN && free <= CLEARER_FREE_RATIO * other
+}
+
 impl CheckReport {
+    /// The share of the points the pose puts into the other sensor's free space, the larger of
+    /// the two ways.
+    pub(crate) fn free_share(&self) -> f64 {
+        self.violations.max(self.reverse_violations)
+    }
+
     /// `true` for [`Verdict::Consistent`].
     pub fn is_consistent(&self) -> bool {
         self.verdict == Verdict::Consistent

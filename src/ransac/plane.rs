@@ -299,8 +299,31 @@ pub fn extract_planes(
         ));
     }
 
+    let mut extracted = joint_refit(
+        points,
+        &found,
+        threshold,
+        min_inliers,
+        options.refinement_rounds,
+    )?;
+    extracted.sort_by_key(|p| std::cmp::Reverse(p.inliers.len()));
+    Ok(extracted)
+}
+
+/// The joint refinement of [`extract_planes`]: `rounds` times each point goes to the only plane
+/// within `threshold` of it and the planes are refitted; then the final assignment. The planes
+/// keep their order.
+///
+/// Errors: [`Error::Calibration`] when a plane keeps fewer than `min_inliers` inliers.
+pub(crate) fn joint_refit(
+    points: &[Point3<f64>],
+    found: &[(Plane, usize)],
+    threshold: f64,
+    min_inliers: usize,
+    rounds: usize,
+) -> Result<Vec<ExtractedPlane>> {
     let mut planes: Vec<Plane> = found.iter().map(|(p, _)| *p).collect();
-    for _ in 0..options.refinement_rounds {
+    for _ in 0..rounds {
         let groups = assign(points, &planes, threshold);
         let mut changed = false;
         for (plane, group) in planes.iter_mut().zip(&groups) {
@@ -314,10 +337,10 @@ pub fn extract_planes(
         }
     }
     let groups = assign(points, &planes, threshold);
-    let mut extracted: Vec<ExtractedPlane> = planes
+    let extracted: Vec<ExtractedPlane> = planes
         .iter()
         .zip(groups)
-        .zip(&found)
+        .zip(found)
         .map(|((plane, inliers), (_, hypotheses))| ExtractedPlane {
             plane: plane.oriented_toward(&Point3::origin()),
             rms: super::rms(&PlaneEstimator, points, plane, &inliers),
@@ -334,6 +357,188 @@ pub fn extract_planes(
             ),
         ));
     }
-    extracted.sort_by_key(|p| std::cmp::Reverse(p.inliers.len()));
     Ok(extracted)
+}
+
+/// A plane parallel to one of a cloud's accepted planes: a candidate for its role.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Alternate {
+    /// Index of the accepted plane it is parallel to.
+    pub(crate) role: usize,
+    /// The plane, normal toward the origin (the sensor).
+    pub(crate) plane: Plane,
+    /// Hypotheses drawn by the RANSAC run that found it.
+    pub(crate) hypotheses: usize,
+    /// Its inliers among the points the accepted planes leave.
+    pub(crate) inliers: usize,
+    /// Its normal (toward the sensor) opposes the accepted plane's: the far wall of a room.
+    pub(crate) opposed: bool,
+}
+
+/// The planes parallel to the `accepted` ones, the next candidates for their roles: sequential
+/// RANSAC as in [`extract_planes`] on the points farther than the threshold from every accepted
+/// plane, at most `runs` planes of at least `options.min_inliers` inliers. Those whose normal
+/// lies within `max_angle` of an accepted plane's, either way, are returned with its index, largest
+/// first: a box top or a pavement beside the ground, a street's other facade, a room's far wall.
+/// Other planes found on the way are skipped.
+pub(crate) fn parallel_alternates(
+    points: &[Point3<f64>],
+    accepted: &[Plane],
+    options: &ExtractOptions,
+    runs: usize,
+    max_angle: f64,
+) -> Result<Vec<Alternate>> {
+    let threshold = options.ransac.distance_threshold;
+    let min_inliers = options.min_inliers.max(PlaneEstimator::SAMPLE_SIZE);
+    let mut remaining: Vec<usize> = (0..points.len())
+        .filter(|&i| {
+            accepted
+                .iter()
+                .all(|p| p.signed_distance(&points[i]).abs() >= threshold)
+        })
+        .collect();
+    let mut alternates = Vec::new();
+    for run in 0..runs {
+        if remaining.len() < min_inliers {
+            break;
+        }
+        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
+        let ransac_options = RansacOptions {
+            seed: mix_seed(
+                options.ransac.seed,
+                accepted.len() + MAX_DISCARDED + 1 + run,
+            ),
+            ..options.ransac
+        };
+        let result = match ransac(&PlaneEstimator, &subset, &ransac_options) {
+            Ok(r) => r,
+            Err(Error::Degenerate(_)) => break,
+            Err(e) => return Err(e),
+        };
+        if result.inliers.len() < min_inliers {
+            break;
+        }
+        let plane = result.model.oriented_toward(&Point3::origin());
+        let role = accepted
+            .iter()
+            .position(|a| a.normal.dot(&plane.normal).abs() > max_angle.cos());
+        if let Some(role) = role {
+            alternates.push(Alternate {
+                role,
+                plane,
+                hypotheses: result.hypotheses,
+                inliers: result.inliers.len(),
+                opposed: accepted[role].normal.dot(&plane.normal) < 0.0,
+            });
+        }
+        let mut taken = vec![false; subset.len()];
+        for &i in &result.inliers {
+            taken[i] = true;
+        }
+        remaining = remaining
+            .into_iter()
+            .zip(taken)
+            .filter_map(|(i, t)| (!t).then_some(i))
+            .collect();
+    }
+    alternates.sort_by_key(|a| std::cmp::Reverse(a.inliers));
+    Ok(alternates)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// A grid of points on the plane through `origin` spanned by `u` and `v`, `n` by `n`, `step`
+    /// apart.
+    fn patch(origin: [f64; 3], u: [f64; 3], v: [f64; 3], n: usize, step: f64) -> Vec<Point3<f64>> {
+        let (o, u, v) = (Vector3::from(origin), Vector3::from(u), Vector3::from(v));
+        (0..n * n)
+            .map(|k| {
+                let (i, j) = ((k / n) as f64, (k % n) as f64);
+                Point3::from(o + u * (i * step) + v * (j * step))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn parallel_alternates_finds_a_box_top_and_a_far_wall() {
+        // The ground 1.5 m below the sensor, a box top 1 m above it, a wall 4 m to the side and
+        // its opposite wall 3 m to the other side, a wall ahead.
+        let mut points = patch(
+            [-5.0, -2.9, -1.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            60,
+            0.1,
+        );
+        points.extend(patch(
+            [1.0, 1.0, -0.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            12,
+            0.1,
+        ));
+        points.extend(patch(
+            [-5.0, 4.0, -1.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            60,
+            0.05,
+        ));
+        points.extend(patch(
+            [-5.0, -3.0, -1.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            40,
+            0.05,
+        ));
+        points.extend(patch(
+            [6.0, -2.9, -1.4],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            50,
+            0.05,
+        ));
+        let mut options = ExtractOptions::new(3, 0.02);
+        options.min_angle_between = Some(20f64.to_radians());
+        let accepted: Vec<Plane> = extract_planes(&points, &options)
+            .unwrap()
+            .iter()
+            .map(|p| p.plane)
+            .collect();
+        let role_of = |normal: Vector3<f64>| {
+            accepted
+                .iter()
+                .position(|p| p.normal.dot(&normal).abs() > 0.99)
+                .unwrap()
+        };
+        let (ground, side) = (role_of(Vector3::z()), role_of(Vector3::y()));
+        let found =
+            parallel_alternates(&points, &accepted, &options, 4, 10f64.to_radians()).unwrap();
+        let box_top = found
+            .iter()
+            .find(|a| (a.plane.offset - 0.5).abs() < 0.02)
+            .expect("the box top");
+        assert_eq!((box_top.role, box_top.opposed), (ground, false));
+        assert_eq!(box_top.inliers, 144);
+        let far_wall = found
+            .iter()
+            .find(|a| a.role == side && a.opposed)
+            .expect("the opposite wall");
+        assert!(
+            (far_wall.plane.offset - 3.0).abs() < 0.02
+                || (far_wall.plane.offset - 4.0).abs() < 0.02
+        );
+        // Every alternate is parallel to its role's plane, and none is an accepted plane again.
+        for a in &found {
+            let dot = accepted[a.role].normal.dot(&a.plane.normal);
+            assert!(dot.abs() > 10f64.to_radians().cos());
+            assert_eq!(a.opposed, dot < 0.0);
+            assert!(accepted
+                .iter()
+                .all(|p| (p.coefficients() - a.plane.coefficients()).norm() > 0.05));
+        }
+    }
 }

@@ -42,6 +42,14 @@
 //!    for the ground in one cloud only fits the three planes, not the scene, and is refused. Then
 //!    the pose passes through [`crate::check`] ([`PlanarOptions::check`], by default
 //!    [`CheckOptions::fitted`]).
+//! 9. **The next plane.** When the check finds more than 3 % of the points in the other sensor's
+//!    free space, one cloud may have taken a parallel surface for a plane of the corner (a box
+//!    top for the ground). Each role is tried again with the next planes parallel or opposed to it
+//!    in either cloud (up to four more planes sought in what the three leave); an alternative that
+//!    passes the check more than 1 degree or 10 cm from the result, overlapping at least as
+//!    much of the scene with at most half its free-space share, replaces it, unless the
+//!    check's re-alignment moves it more than 0.5 deg / 5 cm or another alternative at a different
+//!    pose keeps the free space about as clear, which refuse it.
 
 use nalgebra::{Point3, Vector3};
 
@@ -58,6 +66,7 @@ use crate::lm::{LmOptions, LmReport, Loss};
 use crate::ransac::plane::{extract_planes, ransac_plane, ExtractOptions, ExtractedPlane};
 use crate::ransac::RansacOptions;
 
+mod alternates;
 mod gates;
 mod matching;
 mod refine;
@@ -338,8 +347,45 @@ pub fn calibrate_planes(
     clock.lap("planes");
     deadline.check("plane extraction")?;
 
+    let pair = Pair {
+        reference,
+        target,
+        thresholds,
+        options,
+        deadline: &deadline,
+    };
+    let found = [found_ref.as_slice(), found_tgt.as_slice()];
+    let first = solve(&pair, found, &mut clock);
+    let mut result = alternates::next_plane(first, &pair, found, &mut clock)?;
+    result.timings = clock.finish();
+    Ok(result)
+}
+
+/// What steps 3-9 work on: the two clouds, their inlier thresholds, the options and the deadline.
+struct Pair<'a> {
+    reference: &'a [Point3<f64>],
+    target: &'a [Point3<f64>],
+    thresholds: [f64; 2],
+    options: &'a PlanarOptions,
+    deadline: &'a Deadline,
+}
+
+/// Steps 3-8 (see the module docs) on the extracted planes of each cloud, `[reference, target]`.
+/// The result's timings are left empty for the caller; the stages are laps of `clock`.
+fn solve(
+    pair: &Pair<'_>,
+    [found_ref, found_tgt]: [&[ExtractedPlane]; 2],
+    clock: &mut Stopwatch,
+) -> Result<PlanarCalibration> {
+    let &Pair {
+        reference,
+        target,
+        thresholds,
+        options,
+        deadline,
+    } = pair;
     // The planes checked and matched (ordering of the target's by Kabsch on the normals).
-    let matched = match_found(reference, target, &found_ref, &found_tgt, options)?;
+    let matched = match_found(reference, target, found_ref, found_tgt, options)?;
     clock.lap("match");
 
     // The closed-form initial pose from the corners.
@@ -347,7 +393,7 @@ pub fn calibrate_planes(
     clock.lap("closed_form");
 
     // LM (and the robust refinement) on the matched planes' inliers.
-    let (inliers_ref, inliers_tgt) = matched_inliers(&found_ref, &matched.matched_tgt)?;
+    let (inliers_ref, inliers_tgt) = matched_inliers(found_ref, &matched.matched_tgt)?;
     let pairs = PlanePairs {
         reference,
         target,
@@ -363,7 +409,7 @@ pub fn calibrate_planes(
         &initial,
         thresholds,
         options,
-        &deadline,
+        deadline,
     )?;
     clock.lap("refine");
 
@@ -396,7 +442,7 @@ pub fn calibrate_planes(
         inliers_target: inliers_tgt.into(),
         covariance,
         refinement: Refinement::from_lm(report.as_ref()),
-        timings: clock.finish(),
+        timings: Default::default(),
         details: PlanarDetails {
             planes_reference: planes_ref,
             planes_target: planes_tgt,

@@ -14,25 +14,15 @@ use super::verify::{
     Verified, Verifier, AMBIGUITY_RATIO, CHALLENGER_AMBIGUITY_RATIO, DISTINCT_ANGLE,
     DISTINCT_DISTANCE, MAX_POLISHED,
 };
-use crate::check::{CheckOptions, CheckReport, PreparedPair, Verdict};
+use crate::check::{clearer, CheckOptions, CheckReport, PreparedPair, Verdict, CLEARER_FREE_MIN};
 use crate::error::Result;
 use crate::geometry::pose_error;
 
 /// A slid copy of the best pose (a repeated structure one period off) that passes the check makes
 /// the result ambiguous when the best pose puts more than this share of the points into the other
 /// sensor's free space (the larger of the two ways; the truth of a simulated scene puts under
-/// 1 %) ...
-pub(super) const SLID_FREE_SPACE_MIN: f64 = 0.01;
-/// ... and the slid copy at most this fraction of the best pose's share.
-pub(super) const SLID_FREE_SPACE_RATIO: f64 = 0.5;
-
-/// Whether a pose that puts the share `free` of the points into the other sensor's free space
-/// (the larger of the two ways, on the check's figures) keeps it clearly clearer than one that
-/// puts `other`: `other` above [`SLID_FREE_SPACE_MIN`] and `free` at most
-/// [`SLID_FREE_SPACE_RATIO`] of it.
-pub(super) fn clearer(free: f64, other: f64) -> bool {
-    other > SLID_FREE_SPACE_MIN && free <= SLID_FREE_SPACE_RATIO * other
-}
+/// 1 %), and the slid copy at most half as much ([`clearer`]).
+pub(super) const SLID_FREE_SPACE_MIN: f64 = CLEARER_FREE_MIN;
 
 /// A half turn of the best pose that passes the check is a twin of it (see
 /// [`Contest::symmetry_rival`]) when it agrees on its overlap, both ways, at least as well as the
@@ -49,12 +39,6 @@ const TWIN_AGREEMENT_MARGIN: f64 = 0.02;
 /// 18.3 % there against the best pose's 9.8 %; the truth of a fresh colonnade one period from
 /// the best pose (repeated 3082) 3.0 % against 1.6 %.
 const AS_CLEAR_MARGIN: f64 = 0.02;
-
-/// The share of the points a pose puts into the other sensor's free space on its check `c` (the
-/// larger of the two ways).
-fn free_share(c: &CheckReport) -> f64 {
-    c.violations.max(c.reverse_violations)
-}
 
 /// A rival the check rules out is dismissed only when it is turned at least this far from the best
 /// pose (radians, 10 degrees); see `calibrate_targetless`.
@@ -157,7 +141,7 @@ impl<'a> Contest<'a> {
     /// The share of points the best pose puts into free space (the larger way) when it passes the
     /// check; `None` when it does not.
     pub(super) fn best_free(&self) -> Result<Option<f64>> {
-        Ok(self.best_check()?.map(free_share))
+        Ok(self.best_check()?.map(CheckReport::free_share))
     }
 
     /// A rival the check rules out is no rival when the best pose passes it: the rival's overlap
@@ -242,7 +226,9 @@ impl<'a> Contest<'a> {
     /// Whether the best pose, passing the check, keeps the free space [`clearer`] than the pose
     /// whose check is `c`.
     fn best_clearer(&self, c: &CheckReport) -> Result<bool> {
-        Ok(self.best_free()?.is_some_and(|f| clearer(f, free_share(c))))
+        Ok(self
+            .best_free()?
+            .is_some_and(|f| clearer(f, c.free_share())))
     }
 
     /// What `v`, the best pose turned about a symmetry of the scene and settled, is to the best
@@ -281,7 +267,7 @@ impl<'a> Contest<'a> {
         if self.indistinguishable(&c)? {
             return Ok(Some(Rival::HalfTurn));
         }
-        let free = free_share(&c);
+        let free = c.free_share();
         Ok(
             (c.verdict == Verdict::Consistent && clearer(free, best_free))
                 .then_some(Rival::ClearerTurn { best_free, free }),
@@ -305,7 +291,7 @@ impl<'a> Contest<'a> {
         };
         let fits = c.agreement >= best.agreement - TWIN_AGREEMENT_MARGIN
             && c.reverse_agreement >= best.reverse_agreement - TWIN_AGREEMENT_MARGIN;
-        Ok(fits && free_share(c) <= free_share(best) + AS_CLEAR_MARGIN)
+        Ok(fits && c.free_share() <= best.free_share() + AS_CLEAR_MARGIN)
     }
 
     /// Whether `r` ties with the best pose and is not ruled out.
@@ -423,7 +409,7 @@ pub(super) fn clearer_contender(
     contenders: impl Iterator<Item = Verified>,
     checks: &LazyCheck<'_>,
 ) -> Result<Option<Rivalry>> {
-    let best_free = free_share(report);
+    let best_free = report.free_share();
     if best_free <= SLID_FREE_SPACE_MIN {
         return Ok(None);
     }
@@ -446,10 +432,10 @@ pub(super) fn clearer_contender(
         let c = checks.pair()?.check(&v.pose)?;
         let better = c.agreement >= report.agreement + CLEARER_AGREEMENT_MARGIN
             && c.reverse_agreement >= report.reverse_agreement + CLEARER_AGREEMENT_MARGIN;
-        if c.verdict == Verdict::Consistent && better && clearer(free_share(&c), best_free) {
+        if c.verdict == Verdict::Consistent && better && clearer(c.free_share(), best_free) {
             let rival = Rival::ClearerContender {
                 best: [report.agreement, report.reverse_agreement, best_free],
-                other: [c.agreement, c.reverse_agreement, free_share(&c)],
+                other: [c.agreement, c.reverse_agreement, c.free_share()],
             };
             return Ok(Some(Rivalry::of(v, rival)));
         }
@@ -533,7 +519,7 @@ pub(super) fn slid_rival(
             continue;
         }
         let c = contest.checks.pair()?.check(&v.pose)?;
-        let free_space = free_share(&c);
+        let free_space = c.free_share();
         if c.verdict == Verdict::Consistent && clearer(free_space, best_free) {
             let rival = Rival::ClearerSlide {
                 best_free,
