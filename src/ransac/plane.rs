@@ -221,6 +221,47 @@ fn mix_seed(seed: u64, k: usize) -> u64 {
     seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
 }
 
+/// One run of the sequential RANSAC of [`extract_planes`]: a plane on the points not yet
+/// `taken` (its inliers then marked taken), with the seed of run `run`. `None` when fewer than
+/// `min_inliers` points remain, they are degenerate, or the best plane has fewer inliers. The
+/// returned inliers index the points the run saw, not `points`.
+fn sequential_run(
+    points: &[Point3<f64>],
+    taken: &mut [bool],
+    options: &RansacOptions,
+    run: usize,
+    min_inliers: usize,
+) -> Result<Option<RansacResult<Plane>>> {
+    let remaining: Vec<usize> = (0..points.len()).filter(|&i| !taken[i]).collect();
+    if remaining.len() < min_inliers {
+        return Ok(None);
+    }
+    // Until a plane is taken the remaining points are the cloud itself: no copy of it.
+    let copy: Vec<Point3<f64>>;
+    let subset: &[Point3<f64>] = if remaining.len() == points.len() {
+        points
+    } else {
+        copy = remaining.iter().map(|&i| points[i]).collect();
+        &copy
+    };
+    let ransac_options = RansacOptions {
+        seed: mix_seed(options.seed, run),
+        ..*options
+    };
+    let result = match ransac(&PlaneEstimator, subset, &ransac_options) {
+        Ok(r) => r,
+        Err(Error::Degenerate(_)) => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    if result.inliers.len() < min_inliers {
+        return Ok(None);
+    }
+    for &i in &result.inliers {
+        taken[remaining[i]] = true;
+    }
+    Ok(Some(result))
+}
+
 /// Extracts `options.count` planes: sequential RANSAC (each plane's inliers removed before the
 /// next), then a joint refinement (see the module docs). Planes are returned largest first.
 ///
@@ -242,34 +283,11 @@ pub fn extract_planes(
     let mut discarded = 0;
     let mut run = 0;
     while found.len() < options.count {
-        let remaining: Vec<usize> = (0..points.len()).filter(|&i| !taken[i]).collect();
-        if remaining.len() < min_inliers {
+        let Some(result) = sequential_run(points, &mut taken, &options.ransac, run, min_inliers)?
+        else {
             break;
-        }
-        // Until a plane is taken the remaining points are the cloud itself: no copy of it.
-        let copy: Vec<Point3<f64>>;
-        let subset: &[Point3<f64>] = if remaining.len() == points.len() {
-            points
-        } else {
-            copy = remaining.iter().map(|&i| points[i]).collect();
-            &copy
-        };
-        let ransac_options = RansacOptions {
-            seed: mix_seed(options.ransac.seed, run),
-            ..options.ransac
         };
         run += 1;
-        let result = match ransac(&PlaneEstimator, subset, &ransac_options) {
-            Ok(r) => r,
-            Err(Error::Degenerate(_)) => break,
-            Err(e) => return Err(e),
-        };
-        if result.inliers.len() < min_inliers {
-            break;
-        }
-        for &i in &result.inliers {
-            taken[remaining[i]] = true;
-        }
         let too_parallel = options
             .min_angle_between
             .is_some_and(|min_angle| dependent(&found, &result.model, min_angle));
@@ -390,34 +408,23 @@ pub(crate) fn parallel_alternates(
 ) -> Result<Vec<Alternate>> {
     let threshold = options.ransac.distance_threshold;
     let min_inliers = options.min_inliers.max(PlaneEstimator::SAMPLE_SIZE);
-    let mut remaining: Vec<usize> = (0..points.len())
-        .filter(|&i| {
+    let mut taken: Vec<bool> = points
+        .iter()
+        .map(|q| {
             accepted
                 .iter()
-                .all(|p| p.signed_distance(&points[i]).abs() >= threshold)
+                .any(|p| p.signed_distance(q).abs() < threshold)
         })
         .collect();
     let mut alternates = Vec::new();
     for run in 0..runs {
-        if remaining.len() < min_inliers {
+        // Seeds after those extract_planes can have used for the accepted planes.
+        let seed_run = accepted.len() + MAX_DISCARDED + 1 + run;
+        let Some(result) =
+            sequential_run(points, &mut taken, &options.ransac, seed_run, min_inliers)?
+        else {
             break;
-        }
-        let subset: Vec<Point3<f64>> = remaining.iter().map(|&i| points[i]).collect();
-        let ransac_options = RansacOptions {
-            seed: mix_seed(
-                options.ransac.seed,
-                accepted.len() + MAX_DISCARDED + 1 + run,
-            ),
-            ..options.ransac
         };
-        let result = match ransac(&PlaneEstimator, &subset, &ransac_options) {
-            Ok(r) => r,
-            Err(Error::Degenerate(_)) => break,
-            Err(e) => return Err(e),
-        };
-        if result.inliers.len() < min_inliers {
-            break;
-        }
         let plane = result.model.oriented_toward(&Point3::origin());
         let role = accepted
             .iter()
@@ -431,15 +438,6 @@ pub(crate) fn parallel_alternates(
                 opposed: accepted[role].normal.dot(&plane.normal) < 0.0,
             });
         }
-        let mut taken = vec![false; subset.len()];
-        for &i in &result.inliers {
-            taken[i] = true;
-        }
-        remaining = remaining
-            .into_iter()
-            .zip(taken)
-            .filter_map(|(i, t)| (!t).then_some(i))
-            .collect();
     }
     alternates.sort_by_key(|a| std::cmp::Reverse(a.inliers));
     Ok(alternates)

@@ -10,17 +10,16 @@
 //! more than [`ALTERNATE_HELD`] (`no_agreement`) or another such alternative at a distinct pose
 //! keeps the free space about as clear (`ambiguous`).
 
+use std::borrow::Cow;
 use std::iter::once;
 
 use super::matching::right_handed;
-use super::{solve, Pair, PlanarCalibration};
+use super::{extract_options, solve, Pair, PlanarCalibration};
 use crate::calib::Stopwatch;
 use crate::check::clearer;
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::{pose_error, Plane};
-use crate::ransac::plane::{
-    joint_refit, parallel_alternates, Alternate, ExtractOptions, ExtractedPlane,
-};
+use crate::ransac::plane::{joint_refit, parallel_alternates, Alternate, ExtractedPlane};
 
 /// A corner result that puts more than this share of the points into free space (the larger of
 /// the two ways) has its roles tried with the next parallel planes.
@@ -59,19 +58,15 @@ pub(super) fn next_plane(
     let clouds = [pair.reference, pair.target];
     let mut alternates: [Vec<Alternate>; 2] = Default::default();
     for (c, alternates) in alternates.iter_mut().enumerate() {
-        let mut o = ExtractOptions::new(3, thresholds[c]);
-        o.min_inliers = options.min_inliers;
-        o.ransac.seed = options.seed;
-        o.ransac.deadline = Some(*pair.deadline);
+        let o = extract_options(thresholds[c], options, pair.deadline);
         let accepted: Vec<Plane> = found[c].iter().map(|p| p.plane).collect();
         *alternates =
             parallel_alternates(clouds[c], &accepted, &o, ALTERNATE_RUNS, PARALLEL_ANGLE)?;
     }
-    // The planes of cloud `c` with `alternate` in its role.
-    // The planes of cloud `c` with each of `swaps` in its role.
-    let swapped = |c: usize, swaps: &[&Alternate]| -> Result<Vec<ExtractedPlane>> {
+    // The planes of cloud `c` with each of `swaps` in its role (borrowed when there is none).
+    let swapped = |c: usize, swaps: &[&Alternate]| -> Result<Cow<'_, [ExtractedPlane]>> {
         if swaps.is_empty() {
-            return Ok(found[c].to_vec());
+            return Ok(Cow::Borrowed(found[c]));
         }
         let mut planes: Vec<(Plane, usize)> =
             found[c].iter().map(|p| (p.plane, p.hypotheses)).collect();
@@ -86,15 +81,14 @@ pub(super) fn next_plane(
             REFIT_ROUNDS,
         )?;
         // An opposed plane turns the handedness of the three.
-        Ok(right_handed(refitted))
+        Ok(Cow::Owned(right_handed(refitted)))
     };
     let mut candidates: Vec<PlanarCalibration> = Vec::new();
     for [swaps_ref, swaps_tgt] in swap_sets(&alternates) {
         let (Ok(r), Ok(t)) = (swapped(0, &swaps_ref), swapped(1, &swaps_tgt)) else {
             continue;
         };
-        let got = solve(pair, [&r, &t], clock);
-        match got {
+        match solve(pair, [&r, &t], clock) {
             Ok(c) => candidates.push(c),
             Err(e) if e.kind() == Some(FailureKind::TimeBudget) => return Err(e),
             Err(_) => {}

@@ -298,6 +298,16 @@ fn validate(
     Ok(())
 }
 
+/// The extraction options of a cloud whose inlier threshold is `threshold`: three planes, the
+/// calibration's fewest inliers, seed and deadline.
+fn extract_options(threshold: f64, options: &PlanarOptions, deadline: &Deadline) -> ExtractOptions {
+    let mut o = ExtractOptions::new(3, threshold);
+    o.min_inliers = options.min_inliers;
+    o.ransac.seed = options.seed;
+    o.ransac.deadline = Some(*deadline);
+    o
+}
+
 /// The inlier threshold and the three planes (right-handed) of each cloud, `[reference, target]`;
 /// the two clouds are independent, so they run side by side.
 fn extract_both(
@@ -311,10 +321,7 @@ fn extract_both(
             Some(t) => t,
             None => estimate_threshold(points, options.seed).map_err(|e| with_cloud(e, which))?,
         };
-        let mut o = ExtractOptions::new(3, threshold);
-        o.min_inliers = options.min_inliers;
-        o.ransac.seed = options.seed;
-        o.ransac.deadline = Some(*deadline);
+        let mut o = extract_options(threshold, options, deadline);
         o.min_angle_between = Some(MIN_PLANE_ANGLE);
         let planes = extract_planes(points, &o).map_err(|e| with_cloud(e, which))?;
         Ok((threshold, right_handed(planes)))

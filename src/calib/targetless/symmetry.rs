@@ -100,8 +100,8 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
 
 /// Turns of a third (120 degrees either way) about the four diagonals of a square corner, through
 /// the point where its three planes meet, when the largest reference planes of three directions
-/// (each more than 10 degrees from the others) make one ([`MAX_CORNER_COSINE`]); none otherwise. Such a turn maps the corner's three planes
-/// onto one another: a cube corner matched plane for plane in the wrong cyclic order. Seen by
+/// (each more than 10 degrees from the others) make one ([`MAX_CORNER_COSINE`]); none otherwise.
+/// Such a turn maps the corner's three planes onto one another: a cube corner matched plane for plane in the wrong cyclic order. Seen by
 /// one sensor on its side, a fresh corner of the adversarial suite (corner 9066, walls 90.7
 /// degrees apart) came back turned 120 degrees and 2.5 m off, passing the check with 18.6 % of
 /// its points in free space; the truth, a third turn of it, puts 3.0 % there.
