@@ -304,6 +304,45 @@ fn ensure_transform(t: &Isometry3<f64>) -> Result<()> {
     }
 }
 
+/// The check's preparation of two clouds (most of its work), made at most once, on the first pose
+/// checked: a method that checks several poses of one pair (the targetless method's rivals, the
+/// corner method's next planes) prepares it once, and one that refuses earlier not at all.
+pub(crate) struct LazyCheck<'a> {
+    reference: &'a [Point3<f64>],
+    target: &'a [Point3<f64>],
+    options: &'a CheckOptions,
+    pair: std::cell::OnceCell<PreparedPair>,
+}
+
+impl<'a> LazyCheck<'a> {
+    pub(crate) fn new(
+        reference: &'a [Point3<f64>],
+        target: &'a [Point3<f64>],
+        options: &'a CheckOptions,
+    ) -> Self {
+        LazyCheck {
+            reference,
+            target,
+            options,
+            pair: std::cell::OnceCell::new(),
+        }
+    }
+
+    /// The options the pair is checked under.
+    pub(crate) fn options(&self) -> &'a CheckOptions {
+        self.options
+    }
+
+    /// The prepared pair (prepared on the first call).
+    pub(crate) fn pair(&self) -> Result<&PreparedPair> {
+        if let Some(pair) = self.pair.get() {
+            return Ok(pair);
+        }
+        let pair = PreparedPair::new(self.reference, self.target, self.options)?;
+        Ok(self.pair.get_or_init(|| pair))
+    }
+}
+
 /// Two clouds made ready for [`check`] once: each downsampled, indexed and binned into its range
 /// image, and the noise scale measured. That is most of a check and does not depend on the pose,
 /// so a method choosing between several poses of one pair checks them all from one preparation.
@@ -355,6 +394,20 @@ impl PreparedPair {
             None => Ok(report),
             Some(e) => Err(e),
         }
+    }
+
+    /// The share of the sampled target points in the overlap at `reference_from_target`: the
+    /// report's [`overlap`](CheckReport::overlap) without the rest of the check, for a method
+    /// that keeps only poses overlapping at least as much as another.
+    pub(crate) fn overlap(&self, reference_from_target: &Isometry3<f64>) -> f64 {
+        self.agreement(reference_from_target).overlap
+    }
+
+    /// The share of the points `reference_from_target` puts into the other sensor's free space,
+    /// the larger of the two ways: the report's [`free_share`](CheckReport::free_share) without
+    /// the rest of the check.
+    pub(crate) fn free_share(&self, reference_from_target: &Isometry3<f64>) -> f64 {
+        self.free_space(reference_from_target).worse()
     }
 
     /// [`check`] on the prepared pair.

@@ -20,6 +20,7 @@ use crate::check::clearer;
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::{pose_error, Plane};
 use crate::ransac::plane::{joint_refit, parallel_alternates, Alternate, ExtractedPlane};
+use nalgebra::Isometry3;
 
 /// A corner result that puts more than this share of the points into free space (the larger of
 /// the two ways) has its roles tried with the next parallel planes.
@@ -41,6 +42,12 @@ const ALTERNATE_HELD: (f64, f64) = (0.5 * std::f64::consts::PI / 180.0, 0.05);
 /// fit noise: of a pole scene's corner (adversarial poles 8061) a far wall refitted on other
 /// points moved the correct pose 2.6 cm and its share from 3.1 % to 1.4 %.
 const SAME_POSE: (f64, f64) = (1.0 * std::f64::consts::PI / 180.0, 0.10);
+
+/// Whether two poses are distinct answers, more than [`SAME_POSE`] apart.
+fn distinct(a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+    let (angle, distance) = pose_error(a, b);
+    angle > SAME_POSE.0 || distance > SAME_POSE.1
+}
 
 /// The next-plane search (see the module docs) after the first result `first` of the extracted
 /// planes `found` of each cloud, `[reference, target]`.
@@ -83,13 +90,25 @@ pub(super) fn next_plane(
         // An opposed plane turns the handedness of the three.
         Ok(Cow::Owned(right_handed(refitted)))
     };
+    // Only a pose `choose` could take, or that could rival the one it takes, is checked: distinct
+    // from the first, overlapping at least as much, and with less in free space (one clearer
+    // than the first has at most half its share, and a rival of that one less than twice that).
+    let keep = |pose: &Isometry3<f64>| -> Result<bool> {
+        if !distinct(pose, &first.reference_from_target) {
+            return Ok(false);
+        }
+        let checks = pair.checks.pair()?;
+        Ok(checks.free_share(pose) < first.check.free_share()
+            && checks.overlap(pose) >= first.check.overlap)
+    };
     let mut candidates: Vec<PlanarCalibration> = Vec::new();
     for [swaps_ref, swaps_tgt] in swap_sets(&alternates) {
         let (Ok(r), Ok(t)) = (swapped(0, &swaps_ref), swapped(1, &swaps_tgt)) else {
             continue;
         };
-        match solve(pair, [&r, &t], clock) {
-            Ok(c) => candidates.push(c),
+        match solve(pair, [&r, &t], clock, &keep) {
+            Ok(Some(c)) => candidates.push(c),
+            Ok(None) => {}
             Err(e) if e.kind() == Some(FailureKind::TimeBudget) => return Err(e),
             Err(_) => {}
         }
@@ -161,8 +180,7 @@ fn choose(
 ) -> Result<PlanarCalibration> {
     let first_free = first.check.free_share();
     let distinct = |a: &PlanarCalibration, b: &PlanarCalibration| {
-        let (angle, distance) = pose_error(&a.reference_from_target, &b.reference_from_target);
-        angle > SAME_POSE.0 || distance > SAME_POSE.1
+        distinct(&a.reference_from_target, &b.reference_from_target)
     };
     let mut candidates: Vec<PlanarCalibration> = candidates
         .into_iter()

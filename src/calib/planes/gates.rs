@@ -38,51 +38,65 @@ pub(super) fn check_widths(
 /// Points of each cloud (at most, by a fixed stride) indexed for [`planes_land_on_planes`].
 const LABEL_SAMPLES: usize = 30_000;
 
+/// Each cloud's stride sample (at most [`LABEL_SAMPLES`] points) indexed for
+/// [`planes_land_on_planes`], `[reference, target]`. It depends on the clouds alone, so the
+/// corner method indexes them once for every choice of planes it tries.
+pub(super) struct Landing {
+    clouds: [SurfaceCloud; 2],
+    strides: [usize; 2],
+}
+
+impl Landing {
+    pub(super) fn new(reference: &[Point3<f64>], target: &[Point3<f64>]) -> Result<Self> {
+        let sample = |points: &[Point3<f64>]| -> Result<(SurfaceCloud, usize)> {
+            let stride = points.len().div_ceil(LABEL_SAMPLES).max(1);
+            let kept = points.iter().step_by(stride).copied().collect();
+            Ok((SurfaceCloud::new(kept)?, stride))
+        };
+        let (r, t) = crate::join(|| sample(reference), || sample(target));
+        let ((r, stride_r), (t, stride_t)) = (r?, t?);
+        Ok(Landing {
+            clouds: [r, t],
+            strides: [stride_r, stride_t],
+        })
+    }
+}
+
 /// `Err(NoAgreement)` when the inliers of a matched plane, mapped onto the other cloud, mostly
 /// land nearest to points that are not inliers of its partner there: the two were different
 /// surfaces, usually parallel and close (a pavement or kerb taken for the ground in one cloud, a
 /// box top), so the three planes agree with one another but not with the scene. Each mapped inlier
-/// (a stride sample) whose nearest point of the other cloud lies within the check's overlap
-/// distance counts; the share whose nearest point is an inlier of the partner plane must reach
-/// [`MIN_PLANE_AGREEMENT`].
+/// (a stride sample) whose nearest point of the other cloud (of its sample in `landing`) lies
+/// within the check's overlap distance counts; the share whose nearest point is an inlier of the
+/// partner plane must reach [`MIN_PLANE_AGREEMENT`].
 pub(super) fn planes_land_on_planes(
-    reference: &[Point3<f64>],
-    target: &[Point3<f64>],
+    landing: &Landing,
+    [reference, target]: [&[Point3<f64>]; 2],
     inliers: [&[Vec<usize>; 3]; 2],
     pose: &Isometry3<f64>,
     overlap_distance: f64,
 ) -> Result<()> {
-    // Each cloud's stride sample with the matched plane of each point (if any).
-    let labelled = |points: &[Point3<f64>], inliers: &[Vec<usize>; 3]| -> Result<_> {
-        let mut label = vec![usize::MAX; points.len()];
-        for (k, idx) in inliers.iter().enumerate() {
+    // The matched plane of each sampled point (if any).
+    let labels = |c: usize, len: usize| -> Vec<usize> {
+        let mut label = vec![usize::MAX; len];
+        for (k, idx) in inliers[c].iter().enumerate() {
             for &i in idx {
                 if let Some(l) = label.get_mut(i) {
                     *l = k;
                 }
             }
         }
-        let stride = points.len().div_ceil(LABEL_SAMPLES).max(1);
-        let (kept, labels): (Vec<Point3<f64>>, Vec<usize>) = points
-            .iter()
-            .zip(label)
-            .step_by(stride)
-            .map(|(p, l)| (*p, l))
-            .unzip();
-        Ok((SurfaceCloud::new(kept)?, labels))
+        label.into_iter().step_by(landing.strides[c]).collect()
     };
-    let (r, t) = crate::join(
-        || labelled(reference, inliers[0]),
-        || labelled(target, inliers[1]),
-    );
-    let ((ref_cloud, ref_labels), (tgt_cloud, tgt_labels)) = (r?, t?);
+    let (ref_labels, tgt_labels) = (labels(0, reference.len()), labels(1, target.len()));
+    let [ref_cloud, tgt_cloud] = &landing.clouds;
     let inverse = pose.inverse();
     for (k, (ref_idx, tgt_idx)) in inliers[0].iter().zip(inliers[1].iter()).enumerate() {
         for (points, idx, onto, labels, map, which, other) in [
             (
                 target,
                 tgt_idx,
-                &ref_cloud,
+                ref_cloud,
                 &ref_labels,
                 pose,
                 "target",
@@ -91,7 +105,7 @@ pub(super) fn planes_land_on_planes(
             (
                 reference,
                 ref_idx,
-                &tgt_cloud,
+                tgt_cloud,
                 &tgt_labels,
                 &inverse,
                 "reference",

@@ -49,16 +49,22 @@
 //!    passes the check more than 1 degree or 10 cm from the result, overlapping at least as
 //!    much of the scene with at most half its free-space share, replaces it, unless the
 //!    check's re-alignment moves it more than 0.5 deg / 5 cm or another alternative at a different
-//!    pose keeps the free space about as clear, which refuse it.
+//!    pose keeps the free space about as clear, which refuse it. The search costs little beside
+//!    the first result: the further planes' RANSAC scores only hypotheses parallel to a plane of
+//!    the corner, an alternative is checked only when it could be chosen or rival the one chosen
+//!    (distinct, overlapping at least as much, less in free space than the result), and the
+//!    clouds are prepared for the check and indexed for step 8 once for every alternative.
 
-use nalgebra::{Point3, Vector3};
+use std::cell::OnceCell;
+
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::input::{isometry, with_cloud};
 pub use super::result::PlanarCalibration;
 use super::result::Refinement;
 use super::Stopwatch;
 use crate::budget::Deadline;
-use crate::check::{certify, CheckOptions};
+use crate::check::{CheckOptions, LazyCheck};
 use crate::error::{Error, FailureKind, Result};
 use crate::fit::Moments;
 use crate::geometry::Plane;
@@ -71,7 +77,7 @@ mod gates;
 mod matching;
 mod refine;
 
-use gates::{plane_rmse, planes_land_on_planes};
+use gates::{plane_rmse, planes_land_on_planes, Landing};
 use matching::{closed_form, match_found, right_handed, Matched};
 use refine::{matched_inliers, moments_problem, refine, PlanePairs};
 
@@ -360,36 +366,60 @@ pub fn calibrate_planes(
         thresholds,
         options,
         deadline: &deadline,
+        checks: LazyCheck::new(reference, target, &options.check),
+        landing: OnceCell::new(),
     };
     let found = [found_ref.as_slice(), found_tgt.as_slice()];
-    let first = solve(&pair, found, &mut clock);
+    let first = solve(&pair, found, &mut clock, &|_| Ok(true)).and_then(|solved| {
+        solved.ok_or_else(|| Error::Numerical("the corner's pose was screened out".into()))
+    });
     let mut result = alternates::next_plane(first, &pair, found, &mut clock)?;
     result.timings = clock.finish();
     Ok(result)
 }
 
-/// What steps 3-9 work on: the two clouds, their inlier thresholds, the options and the deadline.
+/// What steps 3-9 work on: the two clouds, their inlier thresholds, the options, the deadline
+/// and the check's preparation of the two clouds (made once for every pose step 9 tries).
 struct Pair<'a> {
     reference: &'a [Point3<f64>],
     target: &'a [Point3<f64>],
     thresholds: [f64; 2],
     options: &'a PlanarOptions,
     deadline: &'a Deadline,
+    checks: LazyCheck<'a>,
+    /// The clouds indexed for the landing gate (on first use).
+    landing: OnceCell<Landing>,
+}
+
+impl Pair<'_> {
+    /// The clouds indexed for [`planes_land_on_planes`] (indexed on the first call).
+    fn landing(&self) -> Result<&Landing> {
+        if let Some(landing) = self.landing.get() {
+            return Ok(landing);
+        }
+        let landing = Landing::new(self.reference, self.target)?;
+        Ok(self.landing.get_or_init(|| landing))
+    }
 }
 
 /// Steps 3-8 (see the module docs) on the extracted planes of each cloud, `[reference, target]`.
-/// The result's timings are left empty for the caller; the stages are laps of `clock`.
+/// `Ok(None)` when `keep` turns the refined pose down (step 9 keeps only poses it could choose),
+/// before the check, the costliest step. The result's timings are left empty for the caller; the
+/// stages are laps of `clock`.
 fn solve(
     pair: &Pair<'_>,
     [found_ref, found_tgt]: [&[ExtractedPlane]; 2],
     clock: &mut Stopwatch,
-) -> Result<PlanarCalibration> {
+    keep: &dyn Fn(&Isometry3<f64>) -> Result<bool>,
+) -> Result<Option<PlanarCalibration>> {
     let &Pair {
         reference,
         target,
         thresholds,
         options,
         deadline,
+        ref checks,
+        landing: _,
     } = pair;
     // The planes checked and matched (ordering of the target's by Kabsch on the normals).
     let matched = match_found(reference, target, found_ref, found_tgt, options)?;
@@ -425,13 +455,16 @@ fn solve(
     let covariance = report.as_ref().and_then(|r| r.covariance());
     clock.lap("check");
     planes_land_on_planes(
-        reference,
-        target,
+        pair.landing()?,
+        [reference, target],
         [&inliers_ref, &inliers_tgt],
         &pose,
         options.check.overlap_distance,
     )?;
-    let check = certify(reference, target, &pose, &options.check)?;
+    if !keep(&pose)? {
+        return Ok(None);
+    }
+    let check = checks.pair()?.certify(&pose)?;
     clock.lap("certify");
 
     let Matched {
@@ -440,7 +473,7 @@ fn solve(
         ordering,
         ..
     } = matched;
-    Ok(PlanarCalibration {
+    Ok(Some(PlanarCalibration {
         reference_from_target: pose,
         initial_reference_from_target: initial,
         check,
@@ -458,7 +491,7 @@ fn solve(
             distance_thresholds: thresholds,
             report,
         },
-    })
+    }))
 }
 
 #[cfg(test)]
@@ -592,9 +625,10 @@ mod tests {
         let pavement: Vec<usize> = (400..800).collect();
         let as_plane_0 = |idx: &Vec<usize>| [idx.clone(), Vec::new(), Vec::new()];
         let pose = Isometry3::identity();
+        let landing = Landing::new(&cloud, &cloud).unwrap();
         let same = planes_land_on_planes(
-            &cloud,
-            &cloud,
+            &landing,
+            [&cloud, &cloud],
             [&as_plane_0(&ground), &as_plane_0(&ground)],
             &pose,
             0.3,
@@ -602,8 +636,8 @@ mod tests {
         assert!(same.is_ok(), "{same:?}");
         // The target's plane 0 is the pavement: neither set lands next to its partner.
         let err = planes_land_on_planes(
-            &cloud,
-            &cloud,
+            &landing,
+            [&cloud, &cloud],
             [&as_plane_0(&ground), &as_plane_0(&pavement)],
             &pose,
             0.3,

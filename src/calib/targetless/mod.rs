@@ -142,9 +142,10 @@ use self::hypotheses::{
 };
 use self::observability::{observability, Observability};
 use self::refine::{final_icp, refine_planes, PlaneRefinement};
-use self::rivals::{ambiguity_message, clearer_contender, find_rival, Contest, LazyCheck, Rivalry};
+use self::rivals::{ambiguity_message, clearer_contender, find_rival, Contest, Rivalry};
 use self::segment::{check_cloud, prepare, Prepared};
 use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
+use crate::check::LazyCheck;
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 

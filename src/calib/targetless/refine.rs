@@ -6,9 +6,9 @@ use nalgebra::Isometry3;
 
 use super::hypotheses::{agreeing, same_pose};
 use super::options::TargetlessOptions;
-use super::rivals::LazyCheck;
 use super::segment::{PlaneFeature, Prepared};
 use super::verify::{Verified, Verifier, DISTINCT_ANGLE, DISTINCT_DISTANCE, VIOLATION_WEIGHT};
+use crate::check::LazyCheck;
 use crate::error::Result;
 use crate::fit::Moments;
 use crate::icp::IcpResult;

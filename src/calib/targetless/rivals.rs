@@ -14,7 +14,7 @@ use super::verify::{
     Verified, Verifier, AMBIGUITY_RATIO, CHALLENGER_AMBIGUITY_RATIO, DISTINCT_ANGLE,
     DISTINCT_DISTANCE, MAX_POLISHED,
 };
-use crate::check::{clearer, CheckOptions, CheckReport, PreparedPair, Verdict, CLEARER_FREE_MIN};
+use crate::check::{clearer, CheckReport, LazyCheck, Verdict, CLEARER_FREE_MIN};
 use crate::error::Result;
 use crate::geometry::pose_error;
 
@@ -43,39 +43,6 @@ const AS_CLEAR_MARGIN: f64 = 0.02;
 /// A rival the check rules out is dismissed only when it is turned at least this far from the best
 /// pose (radians, 10 degrees); see `calibrate_targetless`.
 pub(super) const RULED_OUT_TURN: f64 = 10.0 * std::f64::consts::PI / 180.0;
-
-/// The check's preparation of the two clouds (most of its work), made at most once, for every
-/// pose checked after the verification.
-pub(super) struct LazyCheck<'a> {
-    reference: &'a [Point3<f64>],
-    target: &'a [Point3<f64>],
-    options: &'a CheckOptions,
-    pair: OnceCell<PreparedPair>,
-}
-
-impl<'a> LazyCheck<'a> {
-    pub(super) fn new(
-        reference: &'a [Point3<f64>],
-        target: &'a [Point3<f64>],
-        options: &'a CheckOptions,
-    ) -> Self {
-        LazyCheck {
-            reference,
-            target,
-            options,
-            pair: OnceCell::new(),
-        }
-    }
-
-    /// The prepared pair (prepared on the first call).
-    pub(super) fn pair(&self) -> Result<&PreparedPair> {
-        if let Some(pair) = self.pair.get() {
-            return Ok(pair);
-        }
-        let pair = PreparedPair::new(self.reference, self.target, self.options)?;
-        Ok(self.pair.get_or_init(|| pair))
-    }
-}
 
 /// The best verified pose against its runner-ups: which of them tie with it, and which of those
 /// the check rules out.
@@ -189,7 +156,7 @@ impl<'a> Contest<'a> {
     /// Whether the check `c` fails whatever its re-alignment: too many points in free space or
     /// too few in agreement.
     fn fails_outright(&self, c: &CheckReport) -> bool {
-        let options = self.checks.options;
+        let options = self.checks.options();
         c.violations.max(c.reverse_violations) > options.max_violations
             || c.agreement.min(c.reverse_agreement) < options.min_agreement
     }
