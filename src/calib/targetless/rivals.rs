@@ -7,7 +7,9 @@ use std::cell::OnceCell;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::hypotheses::{in_range, same_pose, slide_peaks, SlideField};
+use super::hypotheses::{
+    in_range, same_pose, slide_peaks, SlideField, CLEARER_SLIDE_PEAKS, SLIDE_PEAKS,
+};
 use super::segment::{PlaneFeature, Prepared};
 use super::symmetry::{half_turns, third_turns};
 use super::verify::{
@@ -460,7 +462,9 @@ pub(super) fn half_turn_rival(
 /// pose ([`Contest::indistinguishable`]: it agrees within two points both ways and puts at most
 /// two points more of the points into free space) is a rival too ([`Rival::Slide`]): in a fresh
 /// colonnade (adversarial repeated 3082) the best pose, one period (4 m) off, agreed 59 % / 73 %
-/// with 1.6 % of the points in free space and the truth 60 % / 76 % with 3.0 %.
+/// with 1.6 % of the points in free space and the truth 60 % / 76 % with 3.0 %. A clearer
+/// copy is sought among the [`CLEARER_SLIDE_PEAKS`] best peaks, an indistinguishable one only
+/// among the [`SLIDE_PEAKS`] best.
 pub(super) fn slid_rival(
     contest: &Contest<'_>,
     verifier: &Verifier<'_>,
@@ -477,9 +481,10 @@ pub(super) fn slid_rival(
         field,
         verifier.reference_image(),
         contest.max_translation,
+        CLEARER_SLIDE_PEAKS,
     );
-    for peak in peaks {
-        let Some(v) = verifier.settle(&peak) else {
+    for (rank, peak) in peaks.iter().enumerate() {
+        let Some(v) = verifier.settle(peak) else {
             continue;
         };
         if !contest.within(&v) || same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
@@ -494,7 +499,7 @@ pub(super) fn slid_rival(
             };
             return Ok(Some((v, rival)));
         }
-        if contest.indistinguishable(&c)? {
+        if rank < SLIDE_PEAKS && contest.indistinguishable(&c)? {
             return Ok(Some((v, Rival::Slide)));
         }
     }
