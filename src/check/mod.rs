@@ -78,7 +78,7 @@ use realign::{correction_excess, Correction, Detectable};
 use side::Side;
 use verdict::{verdict, Findings};
 
-pub(crate) use report::{clearer, CLEARER_FREE_MIN};
+pub(crate) use report::{clearer, CLEARER_FREE_MIN, MAX_HELD_CORRECTION};
 pub use report::{CheckReport, Verdict};
 
 /// Fewest points in the overlap for a verdict other than [`Verdict::Unverifiable`].

@@ -145,7 +145,7 @@ use self::refine::{final_icp, refine_planes, PlaneRefinement};
 use self::rivals::{ambiguity_message, clearer_contender, find_rival, Contest, Rivalry};
 use self::segment::{check_cloud, prepare, Prepared};
 use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
-use crate::check::LazyCheck;
+use crate::check::{LazyCheck, MAX_HELD_CORRECTION};
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
@@ -598,19 +598,12 @@ fn ensure_best_acceptable(
     ))
 }
 
-/// Largest translation (metres) by which the check's local re-alignment may move a targetless
-/// result, when that move counts as evidence, before the result is refused. The result is
-/// itself an ICP optimum; a re-alignment that carries it further says the scene holds it only
-/// weakly there, which the check's tolerance along weakly held directions (50 cm, set by the
-/// drift of sparse corner and pole scenes) lets pass. On seeds 7000-9999 of the adversarial suite
-/// correct targetless results were moved at most 8.4 cm (counted), wrong ones 11-33 cm off by
-/// 10.9-32.8 cm (corners 8135, 9053, 9073, street 8102).
-const MAX_HELD_CORRECTION: f64 = 0.1;
-
 /// `Err(Unobservable)` when the check's re-alignment moved the result by more than
 /// [`MAX_HELD_CORRECTION`] and that move counted as evidence ([`CheckReport::correction_counted`]).
+/// The result is itself an ICP optimum; a re-alignment that carries it further says the scene
+/// holds it only weakly there.
 fn ensure_held(check: &CheckReport) -> Result<()> {
-    if check.correction_counted && check.correction_translation > MAX_HELD_CORRECTION {
+    if check.moved_beyond_held() {
         return Err(Error::calibration(
             FailureKind::Unobservable,
             format!(
