@@ -113,8 +113,9 @@ fn scene_disagrees(first: &CheckReport) -> Option<Error> {
             FailureKind::NoAgreement,
             format!(
                 "the pole pose passes the check, but the check's local re-alignment on the whole \
-                 scene moves it by {:.1} cm and {:.2} deg (more than {:.0} cm), and no settled \
-                 pose there keeps the poles on their axes and passes the check",
+                 scene moves it by {:.1} cm and {:.2} deg (more than {:.0} cm): the scene holds \
+                 the pose elsewhere, and the re-aligned pose cannot be taken instead (it moves \
+                 too far, leaves a pole off its axis or fails the check)",
                 first.correction_translation * 100.0,
                 first.correction_rotation.to_degrees(),
                 MAX_HELD_CORRECTION * 100.0
