@@ -180,6 +180,19 @@ pub(crate) fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync 
     }
 }
 
+/// The value of `cell`, made by `init` on the first call; an `Err` from `init` is returned and
+/// leaves the cell empty (`OnceCell::get_or_try_init` is not stable yet).
+pub(crate) fn get_or_try_init<T>(
+    cell: &std::cell::OnceCell<T>,
+    init: impl FnOnce() -> Result<T>,
+) -> Result<&T> {
+    if let Some(value) = cell.get() {
+        return Ok(value);
+    }
+    let value = init()?;
+    Ok(cell.get_or_init(|| value))
+}
+
 /// The README's Rust examples, compiled and run as doctests so they cannot rot. They use the
 /// simulator, so they run with feature `sim` (a default feature).
 #[doc = include_str!("../README.md")]

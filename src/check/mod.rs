@@ -335,11 +335,9 @@ impl<'a> LazyCheck<'a> {
 
     /// The prepared pair (prepared on the first call).
     pub(crate) fn pair(&self) -> Result<&PreparedPair> {
-        if let Some(pair) = self.pair.get() {
-            return Ok(pair);
-        }
-        let pair = PreparedPair::new(self.reference, self.target, self.options)?;
-        Ok(self.pair.get_or_init(|| pair))
+        crate::get_or_try_init(&self.pair, || {
+            PreparedPair::new(self.reference, self.target, self.options)
+        })
     }
 }
 

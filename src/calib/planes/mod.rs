@@ -394,11 +394,7 @@ struct Pair<'a> {
 impl Pair<'_> {
     /// The clouds indexed for [`planes_land_on_planes`] (indexed on the first call).
     fn landing(&self) -> Result<&Landing> {
-        if let Some(landing) = self.landing.get() {
-            return Ok(landing);
-        }
-        let landing = Landing::new(self.reference, self.target)?;
-        Ok(self.landing.get_or_init(|| landing))
+        crate::get_or_try_init(&self.landing, || Landing::new(self.reference, self.target))
     }
 }
 
