@@ -527,6 +527,19 @@ mod tests {
             .collect()
     }
 
+    /// The options of the next-plane tests (three planes 20 degrees apart at least, 2 cm) and the
+    /// three planes `extract_planes` takes from `points` under them.
+    fn three_planes(points: &[Point3<f64>]) -> (ExtractOptions, Vec<Plane>) {
+        let mut options = ExtractOptions::new(3, 0.02);
+        options.min_angle_between = Some(20f64.to_radians());
+        let accepted = extract_planes(points, &options)
+            .unwrap()
+            .iter()
+            .map(|p| p.plane)
+            .collect();
+        (options, accepted)
+    }
+
     #[test]
     fn parallel_alternates_score_only_parallel_hypotheses() {
         // A floor, two walls, a ramp at 30 degrees larger than anything left, and a box top
@@ -562,13 +575,7 @@ mod tests {
             12,
             0.1,
         ));
-        let mut options = ExtractOptions::new(3, 0.02);
-        options.min_angle_between = Some(20f64.to_radians());
-        let accepted: Vec<Plane> = extract_planes(&points, &options)
-            .unwrap()
-            .iter()
-            .map(|p| p.plane)
-            .collect();
+        let (options, accepted) = three_planes(&points);
         assert!(accepted
             .iter()
             .all(|p| p.normal.dot(&Vector3::z()).abs() > 0.99
@@ -620,13 +627,7 @@ mod tests {
             50,
             0.05,
         ));
-        let mut options = ExtractOptions::new(3, 0.02);
-        options.min_angle_between = Some(20f64.to_radians());
-        let accepted: Vec<Plane> = extract_planes(&points, &options)
-            .unwrap()
-            .iter()
-            .map(|p| p.plane)
-            .collect();
+        let (options, accepted) = three_planes(&points);
         let role_of = |normal: Vector3<f64>| {
             accepted
                 .iter()
