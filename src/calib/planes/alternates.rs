@@ -2,13 +2,23 @@
 //! two clouds need not agree which that is: a sensor that sees little of the ground takes a box
 //! top 1.4 m up for it (adversarial corner 7134), and the three planes then fit exactly, 1.4 m
 //! off. Such a pose maps one cloud's points through the other's surfaces, so the check sees them in
-//! free space. When it sees more than [`SUSPECT_FREE_SHARE`] of them there, each role is tried
-//! with the next planes parallel or opposed to it in either cloud ([`swap_sets`]). Of the
-//! alternatives that pass the check at a pose distinct from the first result ([`SAME_POSE`]) and
-//! overlap at least as much of the scene, the one with the least free space replaces it when it
-//! keeps the free space clearly clearer ([`clearer`]), unless the check's re-alignment moves it
-//! more than [`ALTERNATE_HELD`] (`no_agreement`) or another such alternative at a distinct pose
-//! keeps the free space about as clear (`ambiguous`).
+//! free space. In a room the clouds may also take different corners of it: the floor for the
+//! ceiling, a near wall for the far one, a pose turned half a turn whose free space can be as clear
+//! as the truth's (adversarial rooms 12006, 12104).
+//!
+//! So when the check sees more than [`SUSPECT_FREE_SHARE`] of the points in free space, or a cloud
+//! holds a sheet facing one of its corner's planes across the sensor ([`opposed_sheet`]: a room
+//! or a street), each role is tried with the next planes parallel or opposed to it in either cloud
+//! ([`swap_sets`]); a correspondence those planes leave tied is tried in each of its shifts. Of the
+//! alternatives at a pose distinct from the first result ([`SAME_POSE`]) that overlap at least as
+//! much of the scene and that the check passes or cannot verify:
+//! - the one with the least free space, if it passed, replaces the first when it keeps the free
+//!   space clearly clearer ([`clearer`]), unless the check's re-alignment moves it more than
+//!   [`ALTERNATE_HELD`] (`no_agreement`) or another alternative at a distinct pose keeps the free
+//!   space about as clear (`ambiguous`);
+//! - otherwise the first is refused when one keeps the free space about as clear as it or clearer
+//!   (`ambiguous`: the scene allows another answer), or when the scene is enclosed and the first
+//!   puts more than [`ENCLOSED_FREE_SHARE`] of the points into free space (`no_agreement`).
 
 use std::borrow::Cow;
 use std::iter::once;
@@ -16,11 +26,13 @@ use std::iter::once;
 use super::matching::right_handed;
 use super::{extract_options, solve, Pair, PlanarCalibration};
 use crate::calib::Stopwatch;
-use crate::check::clearer;
+use crate::check::{clearer, CheckReport, Verdict};
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::{pose_error, Plane};
 use crate::ransac::plane::{joint_refit, parallel_alternates, Alternate, ExtractedPlane};
-use nalgebra::Isometry3;
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Point3};
 
 /// A corner result that puts more than this share of the points into free space (the larger of
 /// the two ways) has its roles tried with the next parallel planes.
@@ -43,6 +55,66 @@ const ALTERNATE_HELD: (f64, f64) = (0.5 * std::f64::consts::PI / 180.0, 0.05);
 /// points moved the correct pose 2.6 cm and its share from 3.1 % to 1.4 %.
 const SAME_POSE: (f64, f64) = (1.0 * std::f64::consts::PI / 180.0, 0.10);
 
+/// A corner result in an enclosed scene ([`opposed_sheet`]) that puts more than this share of the
+/// points into free space, with no alternative keeping it clearer, is refused: seen from inside,
+/// a room hides little from either sensor. The correct corner results in the adversarial rooms
+/// (14 over seeds 0-999 and 10000-12999) kept it at 0 %; the wrong ones, 180 degrees off, put
+/// 8.7 % (10180), 15.7 % (12046) and 18.8 % (11138), the floor matched to the ceiling.
+const ENCLOSED_FREE_SHARE: f64 = 0.05;
+/// Points (at most, by a fixed stride) searched for a sheet opposed to a plane of the corner.
+const SHEET_SAMPLE: usize = 8000;
+/// A sheet opposed to a plane of the corner lies at least this far beyond the sensor (metres).
+const SHEET_BEYOND: f64 = 0.3;
+/// ... and holds at least this share of the cloud's points (besides the planes' fewest inliers).
+/// The far walls of the adversarial rooms whose corner results were 180 degrees off (10180, 11138,
+/// 12006, 12046, 12104) held 17-30 % of the cloud that saw most of them; a clutter box's face
+/// parallel to a wall, 1.4 %; the far wall of an open corner 17 m out (corner 189, whose correct
+/// result put 9.4 % of the points into free space behind clutter), 5.9 %.
+const SHEET_SHARE: f64 = 0.10;
+
+/// Whether the cloud `points` holds a sheet opposed to one of its corner's `planes` (normals
+/// toward the sensor): a band two inlier thresholds thick, parallel to a plane and beyond the
+/// sensor, holding at least [`SHEET_SHARE`] of the points and the fewest inliers of a plane, of
+/// those off the corner's planes (a lidar's near-horizontal rings put a dense band of the walls'
+/// points just above the sensor, across the ground's normal). The
+/// scene is then a room or a street, whose planes can make another corner: a corner result whose
+/// free space is clear has its alternatives sought only then, as the search costs several times
+/// the first result. A surface at an angle to the plane crosses the bands and fills none; a
+/// plane parallel to it fills one.
+fn opposed_sheet(
+    points: &[Point3<f64>],
+    planes: &[ExtractedPlane],
+    threshold: f64,
+    min_inliers: usize,
+) -> bool {
+    let stride = points.len().div_ceil(SHEET_SAMPLE).max(1);
+    let needed = (SHEET_SHARE * points.len() as f64).max(min_inliers as f64) / stride as f64;
+    let width = 2.0 * threshold;
+    let off_planes: Vec<&Point3<f64>> = points
+        .iter()
+        .step_by(stride)
+        .filter(|q| {
+            planes
+                .iter()
+                .all(|p| p.plane.signed_distance(q).abs() >= threshold)
+        })
+        .collect();
+    planes.iter().any(|p| {
+        let plane = &p.plane;
+        let mut bands: HashMap<i64, usize> = HashMap::new();
+        for q in &off_planes {
+            let beyond = plane.normal.dot(&q.coords);
+            if beyond > SHEET_BEYOND {
+                *bands.entry((beyond / width).floor() as i64).or_default() += 1;
+            }
+        }
+        // A sheet may straddle two bands.
+        bands.iter().any(|(band, &count)| {
+            (count + bands.get(&(band + 1)).copied().unwrap_or(0)) as f64 >= needed
+        })
+    })
+}
+
 /// Whether two poses are distinct answers, more than [`SAME_POSE`] apart.
 fn distinct(a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
     let (angle, distance) = pose_error(a, b);
@@ -58,11 +130,16 @@ pub(super) fn next_plane(
     clock: &mut Stopwatch,
 ) -> Result<PlanarCalibration> {
     let (thresholds, options) = (pair.thresholds, pair.options);
+    let clouds = [pair.reference, pair.target];
     let first = match first {
-        Ok(c) if c.check.free_share() > SUSPECT_FREE_SHARE => c,
+        Ok(c) => c,
         other => return other,
     };
-    let clouds = [pair.reference, pair.target];
+    let enclosed =
+        (0..2).any(|k| opposed_sheet(clouds[k], found[k], thresholds[k], options.min_inliers));
+    if !enclosed && first.check.free_share() <= SUSPECT_FREE_SHARE {
+        return Ok(first);
+    }
     let mut alternates: [Vec<Alternate>; 2] = Default::default();
     for (c, alternates) in alternates.iter_mut().enumerate() {
         let o = extract_options(thresholds[c], options, pair.deadline);
@@ -90,31 +167,39 @@ pub(super) fn next_plane(
         // An opposed plane turns the handedness of the three.
         Ok(Cow::Owned(right_handed(refitted)))
     };
-    // Only a pose `choose` could take, or that could rival the one it takes, is checked: distinct
-    // from the first, overlapping at least as much, and with less in free space (one clearer
-    // than the first has at most half its share, and a rival of that one less than twice that).
+    // Only a pose `choose` could take, or that could rival the first or the one it takes, is
+    // checked: distinct from the first, overlapping at least as much, and not clearly dirtier in
+    // free space than the first.
     let keep = |pose: &Isometry3<f64>| -> Result<bool> {
         if !distinct(pose, &first.reference_from_target) {
             return Ok(false);
         }
         let checks = pair.checks.pair()?;
-        Ok(checks.free_share(pose) < first.check.free_share()
-            && checks.overlap(pose) >= first.check.overlap)
+        Ok(checks.overlap(pose) >= first.check.overlap
+            && !clearer(first.check.free_share(), checks.free_share(pose)))
     };
     let mut candidates: Vec<PlanarCalibration> = Vec::new();
     for [swaps_ref, swaps_tgt] in swap_sets(&alternates) {
         let (Ok(r), Ok(t)) = (swapped(0, &swaps_ref), swapped(1, &swaps_tgt)) else {
             continue;
         };
-        match solve(pair, [&r, &t], clock, &keep) {
-            Ok(Some(c)) => candidates.push(c),
-            Ok(None) => {}
-            Err(e) if e.kind() == Some(FailureKind::TimeBudget) => return Err(e),
-            Err(_) => {}
+        // Planes turned half a turn make a corner of nearly equal angles: each shift of a tie is
+        // tried, and the check judges them.
+        let mut tries = vec![None];
+        while let Some(tie) = tries.pop() {
+            match solve(pair, [&r, &t], tie, clock, &keep) {
+                Ok(Some(c)) if c.check.verdict != Verdict::Inconsistent => candidates.push(c),
+                Ok(_) => {}
+                Err(e) if e.kind() == Some(FailureKind::TimeBudget) => return Err(e),
+                Err(e) if tie.is_none() && e.kind() == Some(FailureKind::Ambiguous) => {
+                    tries.extend((0..3).map(Some));
+                }
+                Err(_) => {}
+            }
         }
     }
     clock.lap("next_plane");
-    choose(first, candidates)
+    choose(first, candidates, enclosed)
 }
 
 /// The alternatives tried, as `[reference swaps, target swaps]`: one role at a time in either
@@ -166,7 +251,9 @@ fn swap_sets(alternates: &[Vec<Alternate>; 2]) -> Vec<[Vec<&Alternate>; 2]> {
 }
 
 /// The first result, or the alternative that keeps the free space clearly clearer than it and than
-/// every alternative at another pose (see the module docs).
+/// every alternative at another pose (see the module docs). `candidates` passed the check or were
+/// found unverifiable by it: such a pose cannot be returned, but it can show that the first is not
+/// the only answer the scene allows.
 ///
 /// An alternative counts only if its overlap is at least the first result's: a surface of the
 /// corner found again explains more of the scene, not less. In the corner method's synthetic
@@ -177,6 +264,7 @@ fn swap_sets(alternates: &[Vec<Alternate>; 2]) -> Vec<[Vec<&Alternate>; 2]> {
 fn choose(
     first: PlanarCalibration,
     candidates: Vec<PlanarCalibration>,
+    enclosed: bool,
 ) -> Result<PlanarCalibration> {
     let first_free = first.check.free_share();
     let distinct = |a: &PlanarCalibration, b: &PlanarCalibration| {
@@ -186,18 +274,17 @@ fn choose(
         .into_iter()
         .filter(|c| distinct(c, &first) && c.check.overlap >= first.check.overlap)
         .collect();
-    let Some(best) = candidates
+    let best = candidates
         .iter()
         .enumerate()
+        .filter(|(_, c)| c.check.is_consistent())
         .min_by(|(_, a), (_, b)| a.check.free_share().total_cmp(&b.check.free_share()))
         .map(|(i, _)| i)
-    else {
-        return Ok(first);
+        .filter(|&i| clearer(candidates[i].check.free_share(), first_free));
+    let Some(best) = best else {
+        return first_unrivalled(first, &candidates, enclosed);
     };
     let best_free = candidates[best].check.free_share();
-    if !clearer(best_free, first_free) {
-        return Ok(first);
-    }
     let check = &candidates[best].check;
     if check.correction_counted
         && (check.correction_rotation > ALTERNATE_HELD.0
@@ -227,18 +314,79 @@ fn choose(
             FailureKind::Ambiguous,
             format!(
                 "the corner's first three planes put {:.1} % of the points into the other \
-                 sensor's free space, and two choices of a parallel surface for one of them pass \
-                 the check with {:.1} % and {:.1} %, {:.2} deg / {:.1} cm apart (a box top, a \
-                 kerb or a second facade beside a plane of the corner)",
+                 sensor's free space, and two choices of a parallel surface for one of them fit \
+                 with {:.1} % and {:.1} %, {:.2} deg / {:.1} cm apart (a box top, a kerb or a \
+                 second facade beside a plane of the corner){}",
                 100.0 * first_free,
                 100.0 * best_free,
                 100.0 * rival.check.free_share(),
                 angle.to_degrees(),
-                100.0 * distance
+                100.0 * distance,
+                unverified_note(&rival.check),
             ),
         ));
     }
     Ok(candidates.swap_remove(best))
+}
+
+/// The first result when no alternative keeps the free space clearly clearer: refused when one
+/// keeps it about as clear (not clearly dirtier), overlapping at least as much of the scene, or
+/// clearly clearer though the check could not verify it. The scene then allows another answer the
+/// check cannot tell from the first: a room turned half a turn (adversarial rooms 12006 and 12104,
+/// whose first results were 180 degrees off with 0 % and 2.6 % in free space, the true poses 0 %
+/// at the same or a larger overlap) or its far wall taken for a near one.
+fn first_unrivalled(
+    first: PlanarCalibration,
+    candidates: &[PlanarCalibration],
+    enclosed: bool,
+) -> Result<PlanarCalibration> {
+    let first_free = first.check.free_share();
+    if enclosed && first_free > ENCLOSED_FREE_SHARE {
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            format!(
+                "the corner's three planes put {:.1} % of the points into the other sensor's \
+                 free space, and the scene has surfaces facing the corner's across the sensor \
+                 (a room or a street), where the free space of a right pose is clear: the \
+                 corner matched is not one surface of the scene in both clouds (a floor taken \
+                 for a ceiling, a near wall for a far one?)",
+                100.0 * first_free
+            ),
+        ));
+    }
+    let Some(rival) = candidates
+        .iter()
+        .filter(|c| !clearer(first_free, c.check.free_share()))
+        .min_by(|a, b| a.check.free_share().total_cmp(&b.check.free_share()))
+    else {
+        return Ok(first);
+    };
+    let (angle, distance) = pose_error(&first.reference_from_target, &rival.reference_from_target);
+    Err(Error::calibration(
+        FailureKind::Ambiguous,
+        format!(
+            "the corner's three planes fit with {:.1} % of the points in the other sensor's free \
+             space (overlap {:.0} %), and other planes of the scene fit {:.2} deg / {:.1} cm away \
+             with {:.1} % (overlap {:.0} %): the scene holds more than one such corner (a room \
+             seen from two places?){}",
+            100.0 * first_free,
+            100.0 * first.check.overlap,
+            angle.to_degrees(),
+            100.0 * distance,
+            100.0 * rival.check.free_share(),
+            100.0 * rival.check.overlap,
+            unverified_note(&rival.check),
+        ),
+    ))
+}
+
+/// `"; the check cannot verify that one (REASON)"` for an unverifiable report, else nothing.
+fn unverified_note(check: &CheckReport) -> String {
+    if check.is_consistent() {
+        String::new()
+    } else {
+        format!("; the check cannot verify that one ({})", check.reason)
+    }
 }
 
 #[cfg(test)]
@@ -282,5 +430,78 @@ mod tests {
                 [vec![200, 150], vec![]],
             ]
         );
+    }
+
+    /// Points `step` apart on the rectangle `origin + a u + b v`, `0 <= a < lu`, `0 <= b < lv`.
+    fn sheet(origin: [f64; 3], u: [f64; 3], v: [f64; 3], lu: f64, lv: f64) -> Vec<Point3<f64>> {
+        let (o, u, v) = (Vector3::from(origin), Vector3::from(u), Vector3::from(v));
+        let step = 0.1;
+        let (nu, nv) = ((lu / step) as usize, (lv / step) as usize);
+        (0..nu * nv)
+            .map(|k| Point3::from(o + u * ((k / nv) as f64 * step) + v * ((k % nv) as f64 * step)))
+            .collect()
+    }
+
+    fn corner_plane(normal: Vector3<f64>, offset: f64) -> ExtractedPlane {
+        ExtractedPlane {
+            plane: Plane::new(normal, offset).unwrap(),
+            inliers: Vec::new(),
+            rms: 0.0,
+            hypotheses: 1,
+        }
+    }
+
+    #[test]
+    fn an_opposed_sheet_marks_a_room_not_a_box_face() {
+        // A corner: the floor 1.5 m below the sensor, walls 3 m ahead (x) and 2 m to the side
+        // (y), normals toward the sensor.
+        let planes = [
+            corner_plane(Vector3::z(), 1.5),
+            corner_plane(-Vector3::x(), 3.0),
+            corner_plane(-Vector3::y(), 2.0),
+        ];
+        let mut corner = sheet(
+            [-4.0, -3.0, -1.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            7.0,
+            5.0,
+        );
+        corner.extend(sheet(
+            [3.0, -3.0, -1.5],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            5.0,
+            2.5,
+        ));
+        corner.extend(sheet(
+            [-4.0, 2.0, -1.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            7.0,
+            2.5,
+        ));
+        assert!(!opposed_sheet(&corner, &planes, 0.03, 50));
+        // A box face 0.5 x 0.5 m parallel to the side wall, 2 m across the sensor from it: 25
+        // points of some 7000 is no wall.
+        let mut boxed = corner.clone();
+        boxed.extend(sheet(
+            [1.0, -2.0, -1.5],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            0.5,
+            0.5,
+        ));
+        assert!(!opposed_sheet(&boxed, &planes, 0.03, 50));
+        // The room's far wall, 4 m behind the sensor, faces the wall ahead.
+        let mut room = corner;
+        room.extend(sheet(
+            [-4.0, -3.0, -1.5],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            5.0,
+            2.5,
+        ));
+        assert!(opposed_sheet(&room, &planes, 0.03, 50));
     }
 }

@@ -63,11 +63,15 @@ pub(super) fn right_handed(mut planes: Vec<ExtractedPlane>) -> Vec<ExtractedPlan
     planes
 }
 
-/// Matches the planes and returns the chosen cyclic shift with its rotation.
+/// Matches the planes and returns the chosen cyclic shift with its rotation. `tie`, when given,
+/// takes that shift if it ties with the best (within [`AMBIGUITY_RMS`]), without `up`: the
+/// next-plane search tries each of a tie's shifts and lets the check judge them; a shift that does
+/// not tie is `Err(Ambiguous)` too, as the tie it was asked to resolve is not there.
 pub(super) fn match_planes(
     reference: &[Plane; 3],
     target: &[Plane; 3],
     up: Option<(Vector3<f64>, Vector3<f64>)>,
+    tie: Option<usize>,
 ) -> Result<(Ordering, nalgebra::Rotation3<f64>)> {
     let a = normals(reference);
     let b = normals(target);
@@ -84,7 +88,15 @@ pub(super) fn match_planes(
     let margin = scores[order[1]] - scores[order[0]];
     let mut chosen = order[0];
     let mut used_up = false;
-    if margin < AMBIGUITY_RMS {
+    if let Some(k) = tie {
+        if margin >= AMBIGUITY_RMS || k >= 3 || scores[k] - scores[order[0]] >= AMBIGUITY_RMS {
+            return Err(Error::calibration(
+                FailureKind::Ambiguous,
+                format!("shift {k} does not tie with the best ordering"),
+            ));
+        }
+        chosen = k;
+    } else if margin < AMBIGUITY_RMS {
         let Some((up_ref, up_tgt)) = up else {
             return Err(Error::calibration(
                 FailureKind::Ambiguous,
@@ -161,13 +173,15 @@ pub(super) struct Matched<'a> {
     pub(super) rotation: nalgebra::Rotation3<f64>,
 }
 
-/// Checks the extracted planes of both clouds and matches them ([`match_planes`]).
+/// Checks the extracted planes of both clouds and matches them ([`match_planes`], `tie` as
+/// there).
 pub(super) fn match_found<'a>(
     reference: &[Point3<f64>],
     target: &[Point3<f64>],
     found_ref: &[ExtractedPlane],
     found_tgt: &'a [ExtractedPlane],
     options: &PlanarOptions,
+    tie: Option<usize>,
 ) -> Result<Matched<'a>> {
     for (points, found, which) in [
         (reference, found_ref, "reference"),
@@ -179,7 +193,7 @@ pub(super) fn match_found<'a>(
     let planes_tgt_rh = to_array(&found_tgt.iter().map(|p| p.plane).collect::<Vec<_>>())?;
     check_conditioning(&planes_ref, "reference")?;
     check_conditioning(&planes_tgt_rh, "target")?;
-    let (ordering, rotation) = match_planes(&planes_ref, &planes_tgt_rh, options.up)?;
+    let (ordering, rotation) = match_planes(&planes_ref, &planes_tgt_rh, options.up, tie)?;
     let k = ordering.chosen;
     let matched_tgt: Vec<&ExtractedPlane> = (0..3).map(|i| &found_tgt[(i + k) % 3]).collect();
     let planes_tgt = [

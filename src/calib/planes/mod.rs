@@ -44,16 +44,22 @@
 //!    [`CheckOptions::fitted`]).
 //! 9. **The next plane.** When the check finds more than 3 % of the points in the other sensor's
 //!    free space, one cloud may have taken a parallel surface for a plane of the corner (a box
-//!    top for the ground). Each role is tried again with the next planes parallel or opposed to it
-//!    in either cloud (up to four more planes sought in what the three leave); an alternative that
-//!    passes the check more than 1 degree or 10 cm from the result, overlapping at least as
-//!    much of the scene with at most half its free-space share, replaces it, unless the
-//!    check's re-alignment moves it more than 0.5 deg / 5 cm or another alternative at a different
-//!    pose keeps the free space about as clear, which refuse it. The search costs little beside
-//!    the first result: the further planes' RANSAC scores only hypotheses parallel to a plane of
-//!    the corner, an alternative is checked only when it could be chosen or rival the one chosen
-//!    (distinct, overlapping at least as much, less in free space than the result), and the
-//!    clouds are prepared for the check and indexed for step 8 once for every alternative.
+//!    top for the ground); when a cloud holds a large sheet facing a plane of the corner across the
+//!    sensor (a room, a street), the two clouds may have taken different corners of the scene (a
+//!    room turned half a turn). Then each role is tried again with the next planes parallel or
+//!    opposed to it in either cloud (up to four more planes sought in what the three leave), each
+//!    shift of a tied correspondence in turn; an alternative that passes the check more than
+//!    1 degree or 10 cm from the result, overlapping at least as much of the scene with at most
+//!    half its free-space share, replaces it, unless the check's re-alignment moves it more than
+//!    0.5 deg / 5 cm or another alternative at a different pose keeps the free space about as
+//!    clear, which refuse it. Without such a replacement, the result is refused when an
+//!    alternative overlapping at least as much keeps the free space about as clear (even one the
+//!    check cannot verify), or when the scene is enclosed and the result puts more than 5 % of the
+//!    points into free space. The search costs little beside the first result: the further
+//!    planes' RANSAC scores only hypotheses parallel to a plane of the corner, an alternative is
+//!    checked only when it could be chosen or rival the result (distinct, overlapping at least as
+//!    much, not clearly more in free space), and the clouds are prepared for the check and
+//!    indexed for step 8 once for every alternative.
 
 use std::cell::OnceCell;
 
@@ -370,8 +376,13 @@ pub fn calibrate_planes(
         landing: OnceCell::new(),
     };
     let found = [found_ref.as_slice(), found_tgt.as_slice()];
-    let first = solve(&pair, found, &mut clock, &|_| Ok(true)).and_then(|solved| {
-        solved.ok_or_else(|| Error::Numerical("the corner's pose was screened out".into()))
+    let first = solve(&pair, found, None, &mut clock, &|_| Ok(true)).and_then(|solved| {
+        let c =
+            solved.ok_or_else(|| Error::Numerical("the corner's pose was screened out".into()))?;
+        match c.check.refusal() {
+            None => Ok(c),
+            Some(e) => Err(e),
+        }
     });
     let mut result = alternates::next_plane(first, &pair, found, &mut clock)?;
     result.timings = clock.finish();
@@ -398,13 +409,17 @@ impl Pair<'_> {
     }
 }
 
-/// Steps 3-8 (see the module docs) on the extracted planes of each cloud, `[reference, target]`.
+/// Steps 3-8 (see the module docs) on the extracted planes of each cloud, `[reference, target]`,
+/// the correspondence resolving a tie by `tie` ([`match_planes`](matching::match_planes)).
 /// `Ok(None)` when `keep` turns the refined pose down (step 9 keeps only poses it could choose),
-/// before the check, the costliest step. The result's timings are left empty for the caller; the
-/// stages are laps of `clock`.
+/// before the check, the costliest step. The result carries the check's report whatever its
+/// verdict: the caller refuses what is not consistent (step 9 also weighs a pose the check could
+/// not verify). The result's timings are left empty for the caller; the stages are laps of
+/// `clock`.
 fn solve(
     pair: &Pair<'_>,
     [found_ref, found_tgt]: [&[ExtractedPlane]; 2],
+    tie: Option<usize>,
     clock: &mut Stopwatch,
     keep: &dyn Fn(&Isometry3<f64>) -> Result<bool>,
 ) -> Result<Option<PlanarCalibration>> {
@@ -418,7 +433,7 @@ fn solve(
         landing: _,
     } = pair;
     // The planes checked and matched (ordering of the target's by Kabsch on the normals).
-    let matched = match_found(reference, target, found_ref, found_tgt, options)?;
+    let matched = match_found(reference, target, found_ref, found_tgt, options, tie)?;
     clock.lap("match");
 
     // The closed-form initial pose from the corners.
@@ -460,7 +475,7 @@ fn solve(
     if !keep(&pose)? {
         return Ok(None);
     }
-    let check = checks.pair()?.certify(&pose)?;
+    let check = checks.pair()?.check(&pose)?;
     clock.lap("certify");
 
     let Matched {
