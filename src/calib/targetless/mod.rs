@@ -70,7 +70,9 @@
 //!    other peaks of the slide score is probed the same way when it puts over 1 % of the points
 //!    into free space: a slide that keeps the free space clearly clearer, or that the check
 //!    cannot tell from the best pose, makes it ambiguous (a colonnade or a row of boxes one
-//!    period off).
+//!    period off). Such a best pose is also restarted 0.2 and 0.4 m either way along the largest
+//!    reference plane's normal and settled: a restart that passes the check and keeps the free
+//!    space clearly clearer makes it ambiguous too (the ground matched to a pavement beside it).
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the
