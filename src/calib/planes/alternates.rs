@@ -8,7 +8,8 @@
 //!
 //! So when the check sees more than [`SUSPECT_FREE_SHARE`] of the points in free space, or a cloud
 //! holds a sheet facing one of its corner's planes across the sensor ([`opposed_sheet`]: a room
-//! or a street), each role is tried with the next planes parallel or opposed to it in either cloud
+//! or a street), each role is tried with the next planes near parallel or opposed to it (within
+//! [`PARALLEL_ANGLE`]) in either cloud
 //! ([`swap_sets`]); a correspondence those planes leave tied is tried in each of its shifts. Of the
 //! alternatives at a pose distinct from the first result ([`SAME_POSE`]) that overlap at least as
 //! much of the scene and that the check passes or cannot verify:
@@ -39,8 +40,13 @@ use nalgebra::{Isometry3, Point3};
 pub(super) const SUSPECT_FREE_SHARE: f64 = 0.03;
 /// Planes sought beyond the three of each cloud.
 const ALTERNATE_RUNS: usize = 4;
-/// A plane within this angle of an accepted one (normals toward the sensor) can take its role.
-const PARALLEL_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
+/// A plane within this angle of an accepted one (normals toward the sensor, either way) can take
+/// its role. Not only a parallel surface can be taken for a plane of the corner: beside a fresh
+/// corner of the adversarial suite (corner 13057) the target took an 11 m container's side for a
+/// wall, 28 degrees from the wall it missed (facing away), and the three planes fit 77 degrees
+/// off; with the wall tried in that role the corner is solved exactly. Widening this angle from
+/// 10 to 30 degrees changed no other outcome of seeds 0-999, 12000-12999 or 13000-13999.
+const PARALLEL_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
 /// Alternatives per role and cloud, largest first.
 const PER_ROLE: usize = 2;
 /// Joint reassignment rounds for a set of planes with one swapped in.
