@@ -263,6 +263,26 @@ impl<'a> Contest<'a> {
         Ok(fits && c.free_share() <= best.free_share() + AS_CLEAR_MARGIN)
     }
 
+    /// `start` settled by the verifier ([`Verifier::settle`]) and its check, when it settles
+    /// within max_translation at a pose distinct from the best one; `None` otherwise. The probes
+    /// around the best pose (slides, restarts) judge what this returns.
+    fn settled_elsewhere(
+        &self,
+        verifier: &Verifier<'_>,
+        start: &Isometry3<f64>,
+    ) -> Result<Option<(Verified, CheckReport)>> {
+        let Some(v) = verifier.settle(start) else {
+            return Ok(None);
+        };
+        if !self.within(&v)
+            || same_pose(&v.pose, &self.best.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE)
+        {
+            return Ok(None);
+        }
+        let c = self.checks.pair()?.check(&v.pose)?;
+        Ok(Some((v, c)))
+    }
+
     /// Whether `r` ties with the best pose and is not ruled out.
     pub(super) fn rival(&self, r: &Verified) -> Result<bool> {
         Ok(self.ties(r) && !self.rules_out(r)?)
@@ -489,13 +509,9 @@ pub(super) fn slid_rival(
         CLEARER_SLIDE_PEAKS,
     );
     for (rank, peak) in peaks.iter().enumerate() {
-        let Some(v) = verifier.settle(peak) else {
+        let Some((v, c)) = contest.settled_elsewhere(verifier, peak)? else {
             continue;
         };
-        if !contest.within(&v) || same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
-            continue;
-        }
-        let c = contest.checks.pair()?.check(&v.pose)?;
         let free_space = c.free_share();
         if c.verdict == Verdict::Consistent && clearer(free_space, best_free) {
             let rival = Rival::ClearerSlide {
@@ -535,16 +551,11 @@ pub(super) fn nudged_rival(
         return Ok(None);
     };
     let normal = largest.plane.normal.into_inner();
-    let best = contest.best.pose;
     for offset in NUDGES {
-        let start = Translation3::from(normal * offset) * best;
-        let Some(v) = verifier.settle(&start) else {
+        let start = Translation3::from(normal * offset) * contest.best.pose;
+        let Some((v, c)) = contest.settled_elsewhere(verifier, &start)? else {
             continue;
         };
-        if !contest.within(&v) || same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE) {
-            continue;
-        }
-        let c = contest.checks.pair()?.check(&v.pose)?;
         let free = c.free_share();
         if c.verdict == Verdict::Consistent && clearer(free, best_free) {
             return Ok(Some((v, Rival::ClearerNudge { best_free, free })));
