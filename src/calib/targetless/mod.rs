@@ -96,8 +96,8 @@
 //!    [`TargetlessOptions::max_translation`]. The result, once it passes the check, is refused
 //!    as ambiguous (with `refuse_ambiguous`) when a distinct verified contender scoring at least
 //!    half the best passes the check too, agrees on its overlap 10 points better both ways and
-//!    keeps the free space clearly clearer (at least as clear, when the result puts at most 1 %
-//!    of the points there): the score, a share of all target points, can prefer a wrong pose
+//!    keeps the free space clearly clearer (or puts no more points there than the result and at
+//!    most 1 %): the score, a share of all target points, can prefer a wrong pose
 //!    that overlaps more. The best verified pose is also refused when it
 //!    brings under [`TargetlessOptions::min_agreement`] of the target points into agreement.
 //!

@@ -389,8 +389,8 @@ const CLEARER_AGREEMENT_MARGIN: f64 = 0.1;
 /// prefers to the result although the verification ranks it lower: it scores at least
 /// [`CLEARER_CONTENDER_RATIO`] of the best verified pose `best`, passes the check, agrees on its
 /// overlap both ways [`CLEARER_AGREEMENT_MARGIN`] better than the result (`result`, its check
-/// `report`), and keeps the free space [`clearer`], or, when the result itself puts at most
-/// [`SLID_FREE_SPACE_MIN`] of the points there, at least as clear. The score is a share of all
+/// `report`), and keeps the free space [`clearer`], or puts no more points there than the result
+/// and at most [`SLID_FREE_SPACE_MIN`] of them. The score is a share of all
 /// target points, so a wrong pose that overlaps more can outscore the truth: for two sensors
 /// 7.4 m apart (hard case partial_28) a pose turned 87 degrees scored 0.167 against the truth's
 /// 0.122, with 44 % / 53 % of its overlap in agreement and 6.2 % of the points in free space, the
