@@ -97,9 +97,9 @@
 //!    as ambiguous (with `refuse_ambiguous`) when a distinct verified contender scoring at least
 //!    half the best passes the check too, agrees on its overlap 10 points better both ways and
 //!    keeps the free space clearly clearer (or puts no more points there than the result and at
-//!    most 1 %): the score, a share of all target points, can prefer a wrong pose
-//!    that overlaps more. The best verified pose is also refused when it
-//!    brings under [`TargetlessOptions::min_agreement`] of the target points into agreement.
+//!    most 1 %): the score, a share of all target points, can prefer a wrong pose that overlaps
+//!    more. The best verified pose is also refused when it brings under
+//!    [`TargetlessOptions::min_agreement`] of the target points into agreement.
 //!
 //! # Limits
 //! * Both sensors must see at least two common non-parallel planes (the ground and one facade

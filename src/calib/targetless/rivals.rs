@@ -113,6 +113,12 @@ impl<'a> Contest<'a> {
         Ok(self.best_check()?.map(CheckReport::free_share))
     }
 
+    /// [`Contest::best_free`] when it is over [`SLID_FREE_SPACE_MIN`]: a best pose with points in
+    /// free space, whose third turns, slides and restarts are probed for a clearer rival.
+    fn best_free_suspect(&self) -> Result<Option<f64>> {
+        Ok(self.best_free()?.filter(|f| *f > SLID_FREE_SPACE_MIN))
+    }
+
     /// A rival the check rules out is no rival when the best pose passes it: the rival's overlap
     /// leaves a direction unconstrained (a half turn whose agreement comes from sliding along a
     /// wall) or puts points into free space. A rival that fails only because the check's local
@@ -429,7 +435,7 @@ pub(super) fn clearer_contender(
         if c.verdict == Verdict::Consistent && better && as_clear {
             let rival = Rival::ClearerContender {
                 best: [report.agreement, report.reverse_agreement, best_free],
-                other: [c.agreement, c.reverse_agreement, c.free_share()],
+                other: [c.agreement, c.reverse_agreement, free],
             };
             return Ok(Some(Rivalry::of(v, rival)));
         }
@@ -453,8 +459,8 @@ pub(super) fn half_turn_rival(
     // Third turns only against a best pose with points in free space, as slides: from a best
     // pose with none (correct, corner 7088), a third turn settled half a turn away as a rival
     // the verification ranked within 75 % of it.
-    let thirds = match contest.best_free() {
-        Ok(Some(free)) if free > SLID_FREE_SPACE_MIN => third_turns(features),
+    let thirds = match contest.best_free_suspect() {
+        Ok(Some(_)) => third_turns(features),
         _ => Vec::new(),
     };
     half_turns(features, points)
@@ -496,7 +502,7 @@ pub(super) fn slid_rival(
     free: &Vector3<f64>,
     field: &SlideField,
 ) -> Result<Option<(Verified, Rival)>> {
-    let Some(best_free) = contest.best_free()?.filter(|f| *f > SLID_FREE_SPACE_MIN) else {
+    let Some(best_free) = contest.best_free_suspect()? else {
         return Ok(None);
     };
     let best = contest.best.pose;
@@ -544,7 +550,7 @@ pub(super) fn nudged_rival(
     verifier: &Verifier<'_>,
     features: &[PlaneFeature],
 ) -> Result<Option<(Verified, Rival)>> {
-    let Some(best_free) = contest.best_free()?.filter(|f| *f > SLID_FREE_SPACE_MIN) else {
+    let Some(best_free) = contest.best_free_suspect()? else {
         return Ok(None);
     };
     let Some(largest) = features.first() else {
@@ -677,8 +683,8 @@ pub(super) fn ambiguity_message(
                 "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower (scores \
                  {second_score:.3} and {best_score:.3}{beyond}) but fits where the clouds overlap \
                  clearly better (agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %) and keeps the \
-                 free space at least as clear ({:.1} % against {:.1} %): the best pose may owe its score to a \
-                 larger, wrong overlap; add structure both sensors see",
+                 free space at least as clear ({:.1} % against {:.1} %): the best pose may owe its \
+                 score to a larger, wrong overlap; add structure both sensors see",
                 angle.to_degrees(),
                 100.0 * other[0],
                 100.0 * other[1],
