@@ -37,7 +37,9 @@ use std::time::Instant;
 /// Wall-clock time of each pipeline stage, in milliseconds.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Timings {
-    /// `(stage, milliseconds)` in pipeline order.
+    /// `(stage, milliseconds)` in the order each stage first ran; a stage that runs more than once
+    /// (the corner method's next-plane search repeats matching, refinement and certification)
+    /// holds the sum of its runs.
     pub stages: Vec<(&'static str, f64)>,
 }
 
@@ -62,11 +64,14 @@ impl Stopwatch {
         }
     }
 
-    /// Closes the current stage under `name`.
+    /// Closes the current stage under `name`, adding to it if it ran before.
     pub(crate) fn lap(&mut self, name: &'static str) {
         let now = Instant::now();
         let ms = now.duration_since(self.last).as_secs_f64() * 1e3;
-        self.timings.stages.push((name, ms));
+        match self.timings.stages.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, total)) => *total += ms,
+            None => self.timings.stages.push((name, ms)),
+        }
         self.last = now;
     }
 

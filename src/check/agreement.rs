@@ -145,3 +145,49 @@ fn violation_share(
     let (violations, tested) = image.tally(points, image_from_points);
     violations as f64 / tested.max(1) as f64
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::{CheckOptions, PreparedPair};
+    use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+    /// A floor and two walls around the sensor, `step` metres between points.
+    fn room(step: f64) -> Vec<Point3<f64>> {
+        let mut points = Vec::new();
+        let n = (8.0 / step) as i32;
+        for i in -n..=n {
+            for j in -n..=n {
+                let (a, b) = (f64::from(i) * step, f64::from(j) * step);
+                points.push(Point3::new(a, b, -1.5));
+                if b > -1.5 {
+                    points.push(Point3::new(6.0, a, b));
+                    points.push(Point3::new(a, 5.0, b));
+                }
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn the_overlap_alone_is_the_agreements_overlap() {
+        let reference = room(0.1);
+        let shift = Isometry3::from_parts(
+            Translation3::new(0.4, -0.3, 0.1),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.2),
+        );
+        let target: Vec<Point3<f64>> = room(0.13).iter().map(|p| shift * p).collect();
+        let pair = PreparedPair::new(&reference, &target, &CheckOptions::default()).unwrap();
+        let truth = shift.inverse();
+        for pose in [
+            truth,
+            Translation3::new(0.2, 0.0, 0.0) * truth,
+            Translation3::new(3.0, 1.0, 0.0) * truth,
+            Isometry3::identity(),
+        ] {
+            let overlap = pair.overlap(&pose);
+            assert_eq!(overlap, pair.agreement(&pose).overlap);
+            assert!((0.0..=1.0).contains(&overlap));
+        }
+        assert!(pair.overlap(&truth) > 0.5);
+    }
+}

@@ -146,13 +146,16 @@ pub(super) fn next_plane(
     if !enclosed && first.check.free_share() <= SUSPECT_FREE_SHARE {
         return Ok(first);
     }
-    let mut alternates: [Vec<Alternate>; 2] = Default::default();
-    for (c, alternates) in alternates.iter_mut().enumerate() {
+    // The two clouds' searches are independent: side by side.
+    let alternates_of = |c: usize| -> Result<Vec<Alternate>> {
         let o = extract_options(thresholds[c], options, pair.deadline);
         let accepted: Vec<Plane> = found[c].iter().map(|p| p.plane).collect();
-        *alternates =
-            parallel_alternates(clouds[c], &accepted, &o, ALTERNATE_RUNS, PARALLEL_ANGLE)?;
-    }
+        parallel_alternates(clouds[c], &accepted, &o, ALTERNATE_RUNS, PARALLEL_ANGLE)
+    };
+    let (reference_alternates, target_alternates) =
+        crate::join(|| alternates_of(0), || alternates_of(1));
+    let alternates = [reference_alternates?, target_alternates?];
+    clock.lap("alternates");
     // The planes of cloud `c` with each of `swaps` in its role (borrowed when there is none).
     let swapped = |c: usize, swaps: &[&Alternate]| -> Result<Cow<'_, [ExtractedPlane]>> {
         if swaps.is_empty() {
@@ -186,14 +189,19 @@ pub(super) fn next_plane(
     };
     let mut candidates: Vec<PlanarCalibration> = Vec::new();
     for [swaps_ref, swaps_tgt] in swap_sets(&alternates) {
-        let (Ok(r), Ok(t)) = (swapped(0, &swaps_ref), swapped(1, &swaps_tgt)) else {
+        let refitted = (swapped(0, &swaps_ref), swapped(1, &swaps_tgt));
+        clock.lap("refit");
+        let (Ok(r), Ok(t)) = refitted else {
             continue;
         };
         // Planes turned half a turn make a corner of nearly equal angles: each shift of a tie is
         // tried, and the check judges them.
         let mut tries = vec![None];
         while let Some(tie) = tries.pop() {
-            match solve(pair, [&r, &t], tie, clock, &keep) {
+            let solved = solve(pair, [&r, &t], tie, clock, &keep);
+            // What a solve that ended early (screened out or failed) spent since its last lap.
+            clock.lap("screened");
+            match solved {
                 Ok(Some(c)) if c.check.verdict != Verdict::Inconsistent => candidates.push(c),
                 Ok(_) => {}
                 Err(e) if e.kind() == Some(FailureKind::TimeBudget) => return Err(e),

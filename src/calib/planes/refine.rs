@@ -221,51 +221,60 @@ pub(super) fn moments_problem(pairs: &PlanePairs<'_>) -> Result<PlaneMomentsProb
     PlaneMomentsProblem::new(moment_groups)
 }
 
-/// The refined pose and its report (LM on the moments, then IRLS under a robust loss), or the
-/// closed-form pose `initial` unrefined when [`PlanarOptions::refine`] is off.
-pub(super) fn refine(
-    pairs: &PlanePairs<'_>,
+/// The least-squares pose on the sufficient statistics (LM on the moments, microseconds), or
+/// `None` when [`PlanarOptions::refine`] is off: the refinement's first stage, from which
+/// [`robust`] starts.
+pub(super) fn least_squares(
     moments_problem: &PlaneMomentsProblem,
+    initial: &Isometry3<f64>,
+    options: &PlanarOptions,
+) -> Result<Option<LmSolution>> {
+    if !options.refine {
+        return Ok(None);
+    }
+    solve(moments_problem, initial, &options.lm).map(Some)
+}
+
+/// The refined pose and its report: from the [`least_squares`] solution, IRLS under a robust
+/// loss (the least-squares solution itself under [`Loss::Squared`]); the closed-form pose
+/// `initial` unrefined when there is no least-squares solution (refinement off).
+pub(super) fn robust(
+    pairs: &PlanePairs<'_>,
+    least_squares: Option<LmSolution>,
     initial: &Isometry3<f64>,
     thresholds: [f64; 2],
     options: &PlanarOptions,
     deadline: &Deadline,
 ) -> Result<(Isometry3<f64>, Option<LmReport>)> {
-    let initial = *initial;
+    let Some(least_squares) = least_squares else {
+        return Ok((*initial, None));
+    };
     let loss = options.loss.unwrap_or(Loss::Cauchy {
         scale: DEFAULT_CAUCHY_SCALE * thresholds[0].max(thresholds[1]),
     });
-    let (pose, report) = if options.refine {
-        // The exact least-squares solution on the sufficient statistics costs microseconds; a
-        // robust loss then starts from it and needs only a few passes over the points.
-        let least_squares = solve(moments_problem, &initial, &options.lm)?;
-        let solution = match loss {
-            Loss::Squared => least_squares,
-            loss => irls(
-                &InlierPlanes::new(pairs, loss)?,
-                &least_squares,
-                &options.lm,
-                deadline,
-            )?,
-        };
-        // A robust refinement that does not settle is being pulled between two poses by the
-        // inliers (points of a neighbouring surface taken into a plane): its pose is not one the
-        // planes agree on. Measured on the fresh adversarial seeds 5000-5499: the one corner
-        // result returned unsettled was 15 cm off.
-        if loss != Loss::Squared && solution.report.termination == Termination::MaxIterations {
-            return Err(Error::calibration(
-                FailureKind::NoAgreement,
-                format!(
-                    "the robust refinement did not settle in {IRLS_MAX_ROUNDS} rounds: the \
-                     planes' inliers pull the pose two ways (points of another surface near a \
-                     plane); the closed-form pose moved {:.3} m",
-                    (solution.pose.translation.vector - initial.translation.vector).norm()
-                ),
-            ));
-        }
-        (solution.pose, Some(solution.report))
-    } else {
-        (initial, None)
+    let solution = match loss {
+        Loss::Squared => least_squares,
+        loss => irls(
+            &InlierPlanes::new(pairs, loss)?,
+            &least_squares,
+            &options.lm,
+            deadline,
+        )?,
     };
-    Ok((pose, report))
+    // A robust refinement that does not settle is being pulled between two poses by the
+    // inliers (points of a neighbouring surface taken into a plane): its pose is not one the
+    // planes agree on. Measured on the fresh adversarial seeds 5000-5499: the one corner
+    // result returned unsettled was 15 cm off.
+    if loss != Loss::Squared && solution.report.termination == Termination::MaxIterations {
+        return Err(Error::calibration(
+            FailureKind::NoAgreement,
+            format!(
+                "the robust refinement did not settle in {IRLS_MAX_ROUNDS} rounds: the \
+                 planes' inliers pull the pose two ways (points of another surface near a \
+                 plane); the closed-form pose moved {:.3} m",
+                (solution.pose.translation.vector - initial.translation.vector).norm()
+            ),
+        ));
+    }
+    Ok((solution.pose, Some(solution.report)))
 }
