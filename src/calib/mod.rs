@@ -79,3 +79,26 @@ impl Stopwatch {
         self.timings
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Stopwatch;
+
+    #[test]
+    fn a_stage_that_runs_twice_is_one_entry_holding_both_runs() {
+        let mut clock = Stopwatch::start();
+        clock.lap("match");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        clock.lap("refine");
+        clock.lap("match");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        clock.lap("match");
+        let timings = clock.finish();
+        let names: Vec<&str> = timings.stages.iter().map(|(n, _)| *n).collect();
+        assert_eq!(names, ["match", "refine"]);
+        // The second and third runs of "match" are in its entry: at least the 2 ms slept there.
+        assert!(timings.stages[0].1 >= 2.0, "{:?}", timings.stages);
+        assert!(timings.stages[1].1 >= 2.0, "{:?}", timings.stages);
+        assert_eq!(timings.total(), timings.stages[0].1 + timings.stages[1].1);
+    }
+}

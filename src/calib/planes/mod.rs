@@ -475,7 +475,7 @@ fn solve(
     // Per-plane RMS over both directions, and the agreement check.
     let rmse = plane_rmse(&pairs, &moments_problem, &pose, thresholds, options)?;
     let covariance = report.as_ref().and_then(|r| r.covariance());
-    clock.lap("check");
+    clock.lap("plane_rmse");
     planes_land_on_planes(
         pair.landing()?,
         [reference, target],
@@ -483,10 +483,13 @@ fn solve(
         &pose,
         options.check.overlap_distance,
     )?;
+    clock.lap("landing");
     if !keep(&pose)? {
         return Ok(None);
     }
-    let check = checks.pair()?.check(&pose)?;
+    let prepared = checks.pair()?;
+    clock.lap("check_preparation");
+    let check = prepared.check(&pose)?;
     clock.lap("certify");
 
     let Matched {
