@@ -42,8 +42,6 @@ const MIN_VISIBILITY_RANGE: f64 = 3.0;
 const VIOLATION_MARGIN: f64 = 0.5;
 /// Relative part of that margin (share of the nearest return's range): bins widen with range.
 const VIOLATION_RELATIVE_MARGIN: f64 = 0.05;
-/// Points per chunk a [`RangeImage`] is built from in parallel.
-const BIN_CHUNK: usize = 8192;
 
 /// The nearest range per azimuth/elevation bin of one scan, around its sensor (see the module
 /// docs).
@@ -81,49 +79,29 @@ impl RangeImage {
             first_row: 0,
             nearest: Vec::new(),
         };
-        // Chunks of the scan are binned side by side (the trigonometry is most of the cost); the
-        // nearest range of a bin is a minimum, the same in any order.
-        let chunks: Vec<&[Point3<f64>]> = points.chunks(BIN_CHUNK).collect();
         // The row is monotone in z / r: the band of rows comes from the extreme ratios, before
         // any bin is stored.
-        let extremes = crate::par_map(&chunks, |chunk| {
-            chunk
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(low, high), p| {
-                    let r = p.coords.norm();
-                    if r >= MIN_VISIBILITY_RANGE {
-                        (low.min(p.z / r), high.max(p.z / r))
-                    } else {
-                        (low, high)
-                    }
-                })
-        });
-        let (low, high) = extremes
-            .into_iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(low, high), (l, h)| {
-                (low.min(l), high.max(h))
-            });
+        let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+        for p in points {
+            let r = p.coords.norm();
+            if r >= MIN_VISIBILITY_RANGE {
+                low = low.min(p.z / r);
+                high = high.max(p.z / r);
+            }
+        }
         if low > high {
             return Ok(image);
         }
         let (first, last) = (image.row(low), image.row(high));
         image.first_row = first;
         image.nearest = vec![f32::INFINITY; columns * (last - first + 1)];
-        let binned = crate::par_map(&chunks, |chunk| {
-            chunk
-                .iter()
-                .filter_map(|p| {
-                    let r = p.coords.norm();
-                    if r < MIN_VISIBILITY_RANGE {
-                        return None;
-                    }
-                    Some((image.bin(p, r)?, r as f32))
-                })
-                .collect::<Vec<_>>()
-        });
-        for (bin, r) in binned.into_iter().flatten() {
-            if let Some(slot) = image.nearest.get_mut(bin) {
-                *slot = slot.min(r);
+        for p in points {
+            let r = p.coords.norm();
+            if r < MIN_VISIBILITY_RANGE {
+                continue;
+            }
+            if let Some(slot) = image.bin(p, r).and_then(|b| image.nearest.get_mut(b)) {
+                *slot = slot.min(r as f32);
             }
         }
         Ok(image)
