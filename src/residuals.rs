@@ -202,6 +202,10 @@ struct PlaneTerm {
     normal: Vector3<f64>,
     offset: f64,
     pose: Isometry3<f64>,
+    /// The plane in the points' own frame: the distance of a point without mapping it (the IRLS
+    /// passes weigh every inlier by it, round after round).
+    local_normal: Vector3<f64>,
+    local_offset: f64,
 }
 
 impl PlaneTerm {
@@ -211,12 +215,18 @@ impl PlaneTerm {
 
     fn of(plane: &Plane, frame: Frame, pose: &Isometry3<f64>) -> Self {
         match frame {
-            Frame::Target => PlaneTerm {
-                frame: Frame::Target,
-                normal: plane.normal.into_inner(),
-                offset: plane.offset,
-                pose: *pose,
-            },
+            Frame::Target => {
+                // n . (R p + t) + d = (R^T n) . p + (n . t + d)
+                let normal = plane.normal.into_inner();
+                PlaneTerm {
+                    frame: Frame::Target,
+                    normal,
+                    offset: plane.offset,
+                    pose: *pose,
+                    local_normal: pose.rotation.inverse_transform_vector(&normal),
+                    local_offset: normal.dot(&pose.translation.vector) + plane.offset,
+                }
+            }
             Frame::Reference => {
                 let plane = plane.transformed(pose);
                 PlaneTerm {
@@ -224,6 +234,8 @@ impl PlaneTerm {
                     normal: plane.normal.into_inner(),
                     offset: plane.offset,
                     pose: *pose,
+                    local_normal: plane.normal.into_inner(),
+                    local_offset: plane.offset,
                 }
             }
         }
@@ -249,10 +261,7 @@ impl PlaneTerm {
 
     #[inline]
     fn distance(&self, p: &Point3<f64>) -> f64 {
-        match self.frame {
-            Frame::Target => self.normal.dot(&(self.pose * p).coords) + self.offset,
-            Frame::Reference => self.normal.dot(&p.coords) + self.offset,
-        }
+        self.local_normal.dot(&p.coords) + self.local_offset
     }
 }
 

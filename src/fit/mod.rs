@@ -73,8 +73,9 @@ impl Moments {
         let d = p.coords - self.origin;
         self.count += 1;
         self.weight += w;
-        self.sum += d * w;
-        self.outer += d * d.transpose() * w;
+        let dw = d * w;
+        self.sum += dw;
+        self.outer += dw * d.transpose();
     }
 
     /// Number of points.
