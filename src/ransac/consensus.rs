@@ -141,14 +141,59 @@ pub fn ransac<E: Estimator>(
     crate::error::ensure_points("points", points.iter())?;
     // The search runs on at most MAX_SEARCH_POINTS points (a fixed stride through the cloud); the
     // final support and least-squares refit use every point.
-    let stride = n.div_ceil(MAX_SEARCH_POINTS).max(1);
-    let subset: Vec<Point3<f64>>;
-    let search: &[Point3<f64>] = if stride > 1 {
-        subset = points.iter().step_by(stride).copied().collect();
-        &subset
+    let search_points = search_points(points);
+    let threshold = options.distance_threshold;
+    let Search {
+        model,
+        score,
+        drawn,
+        scored,
+        point_tests,
+    } = search(estimator, &search_points, options)?;
+    // Final least-squares refit on the inliers of the best model.
+    let support = inliers(estimator, points, &model, threshold);
+    let model = estimator.refit(points, &support).unwrap_or(model);
+    let support = inliers(estimator, points, &model, threshold);
+    Ok(RansacResult {
+        model,
+        rms: rms(estimator, points, &model, &support),
+        inliers: support,
+        cost: score.cost,
+        hypotheses: drawn,
+        scored,
+        point_tests,
+    })
+}
+
+/// The points a RANSAC search runs on: `points` itself, or every `stride`-th of them (a copy)
+/// when there are more than [`MAX_SEARCH_POINTS`], `stride = ceil(n / MAX_SEARCH_POINTS)`.
+pub(super) fn search_points<T: Copy>(points: &[T]) -> std::borrow::Cow<'_, [T]> {
+    let stride = points.len().div_ceil(MAX_SEARCH_POINTS).max(1);
+    if stride > 1 {
+        std::borrow::Cow::Owned(points.iter().step_by(stride).copied().collect())
     } else {
-        points
-    };
+        std::borrow::Cow::Borrowed(points)
+    }
+}
+
+/// The best model of a RANSAC search and its score, with the search's counts: [`ransac`] before
+/// its final refit on every point.
+pub(super) struct Search<M> {
+    pub(super) model: M,
+    pub(super) score: Score,
+    pub(super) drawn: usize,
+    pub(super) scored: usize,
+    pub(super) point_tests: u64,
+}
+
+/// The search of [`ransac`] on `search` (all of it: at most [`MAX_SEARCH_POINTS`] points, see
+/// [`search_points`]).
+pub(super) fn search<E: Estimator>(
+    estimator: &E,
+    search: &[Point3<f64>],
+    options: &RansacOptions,
+) -> Result<Search<E::Model>> {
+    let s = E::SAMPLE_SIZE;
     let n_search = search.len();
     let cloud = Cloud::new(search)?;
     estimator.check_cloud(search)?;
@@ -210,16 +255,10 @@ pub fn ransac<E: Estimator>(
             E::NAME
         )));
     };
-    // Final least-squares refit on the inliers of the best model.
-    let support = inliers(estimator, points, &model, threshold);
-    let model = estimator.refit(points, &support).unwrap_or(model);
-    let support = inliers(estimator, points, &model, threshold);
-    Ok(RansacResult {
+    Ok(Search {
         model,
-        rms: rms(estimator, points, &model, &support),
-        inliers: support,
-        cost: score.cost,
-        hypotheses: drawn,
+        score,
+        drawn,
         scored,
         point_tests,
     })

@@ -294,6 +294,30 @@ pub fn inliers<E: Estimator>(
     points.iter().enumerate().filter_map(inside).collect()
 }
 
+/// The indices among `among` (ascending, as given) of the points within `threshold` of `model`:
+/// [`inliers`] of the points `points[among]` without a copy of them, by index into `points`.
+pub(crate) fn inliers_among<E: Estimator>(
+    estimator: &E,
+    points: &[Point3<f64>],
+    among: &[usize],
+    model: &E::Model,
+    threshold: f64,
+) -> Vec<usize> {
+    let t2 = threshold * threshold;
+    let inside = |&i: &usize| {
+        points
+            .get(i)
+            .is_some_and(|p| estimator.squared_distance(model, p) < t2)
+            .then_some(i)
+    };
+    #[cfg(feature = "parallel")]
+    if among.len() >= PARALLEL_MIN_POINTS {
+        use rayon::prelude::*;
+        return among.par_iter().filter_map(inside).collect();
+    }
+    among.iter().filter_map(inside).collect()
+}
+
 /// Per-point passes (inliers, joint assignment) run in parallel only from this many points: below
 /// it, handing the work to the thread pool costs more than it saves (measured on 10k-point clouds).
 /// The output is the same either way.
