@@ -143,26 +143,10 @@ pub fn ransac<E: Estimator>(
     // final support and least-squares refit use every point.
     let search_points = search_points(points);
     let threshold = options.distance_threshold;
-    let Search {
-        model,
-        score,
-        drawn,
-        scored,
-        point_tests,
-    } = search(estimator, &search_points, options)?;
-    // Final least-squares refit on the inliers of the best model.
-    let support = inliers(estimator, points, &model, threshold);
-    let model = estimator.refit(points, &support).unwrap_or(model);
-    let support = inliers(estimator, points, &model, threshold);
-    Ok(RansacResult {
-        model,
-        rms: rms(estimator, points, &model, &support),
-        inliers: support,
-        cost: score.cost,
-        hypotheses: drawn,
-        scored,
-        point_tests,
-    })
+    let found = search(estimator, &search_points, options)?;
+    Ok(found.finish(estimator, points, |model| {
+        inliers(estimator, points, model, threshold)
+    }))
 }
 
 /// The points a RANSAC search runs on: `points` itself, or every `stride`-th of them (a copy)
@@ -179,11 +163,35 @@ pub(super) fn search_points<T: Copy>(points: &[T]) -> std::borrow::Cow<'_, [T]> 
 /// The best model of a RANSAC search and its score, with the search's counts: [`ransac`] before
 /// its final refit on every point.
 pub(super) struct Search<M> {
-    pub(super) model: M,
-    pub(super) score: Score,
-    pub(super) drawn: usize,
-    pub(super) scored: usize,
-    pub(super) point_tests: u64,
+    model: M,
+    score: Score,
+    drawn: usize,
+    scored: usize,
+    point_tests: u64,
+}
+
+impl<M: Copy> Search<M> {
+    /// How RANSAC ends: the best model refitted by least squares on its inliers, `support(model)`
+    /// (indices into `points`, ascending), and the result with that refit's inliers.
+    pub(super) fn finish<E: Estimator<Model = M>>(
+        self,
+        estimator: &E,
+        points: &[Point3<f64>],
+        support: impl Fn(&M) -> Vec<usize>,
+    ) -> RansacResult<M> {
+        let first = support(&self.model);
+        let model = estimator.refit(points, &first).unwrap_or(self.model);
+        let support = support(&model);
+        RansacResult {
+            model,
+            rms: rms(estimator, points, &model, &support),
+            inliers: support,
+            cost: self.score.cost,
+            hypotheses: self.drawn,
+            scored: self.scored,
+            point_tests: self.point_tests,
+        }
+    }
 }
 
 /// The search of [`ransac`] on `search` (all of it: at most [`MAX_SEARCH_POINTS`] points, see

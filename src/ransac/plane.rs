@@ -262,26 +262,18 @@ fn sequential_run<E: Estimator<Model = Plane>>(
     };
     // The final least-squares refit on the inliers of the best model, as `ransac` ends.
     let threshold = options.distance_threshold;
-    let support = inliers_among(estimator, points, &remaining, &found.model, threshold);
-    let model = estimator.refit(points, &support).unwrap_or(found.model);
-    let support = inliers_among(estimator, points, &remaining, &model, threshold);
-    if support.len() < min_inliers {
+    let result = found.finish(estimator, points, |model| {
+        inliers_among(estimator, points, &remaining, model, threshold)
+    });
+    if result.inliers.len() < min_inliers {
         return Ok(None);
     }
-    for &i in &support {
+    for &i in &result.inliers {
         if let Some(t) = taken.get_mut(i) {
             *t = true;
         }
     }
-    Ok(Some(RansacResult {
-        model,
-        rms: super::rms(estimator, points, &model, &support),
-        inliers: support,
-        cost: found.score.cost,
-        hypotheses: found.drawn,
-        scored: found.scored,
-        point_tests: found.point_tests,
-    }))
+    Ok(Some(result))
 }
 
 /// Extracts `options.count` planes: sequential RANSAC (each plane's inliers removed before the
