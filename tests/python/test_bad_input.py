@@ -54,9 +54,18 @@ def parallel_poles() -> F64:
     return sim.scan([ground, a, b], "vlp16", seed=3)
 
 
+# One scratch folder for the whole module, removed when the interpreter exits:
+# the cases below write hundreds of small files and must not leave them behind.
+_SCRATCH = tempfile.TemporaryDirectory(prefix="lidarcal-bad-")
+
+
+def _scratch(suffix: str = "") -> Path:
+    """A fresh empty folder inside the module's scratch folder."""
+    return Path(tempfile.mkdtemp(suffix=suffix, dir=_SCRATCH.name))
+
+
 def _tmp(name: str, content: bytes) -> Path:
-    d = Path(tempfile.mkdtemp(prefix="lidarcal-bad-"))
-    path = d / name
+    path = _scratch() / name
     path.write_bytes(content)
     return path
 
@@ -584,7 +593,7 @@ CASES: list[Case] = [
     ),
     Case(
         "read: directory",
-        lambda: lidarcal.read_points(tempfile.mkdtemp(suffix=".ply")),
+        lambda: lidarcal.read_points(_scratch(suffix=".ply")),
         IsADirectoryError,
         ".ply",
     ),
@@ -677,27 +686,27 @@ CASES: list[Case] = [
     ),
     Case(
         "write: values beyond float32",
-        lambda: lidarcal.write_points(Path(tempfile.mkdtemp()) / "a.ply", np.full((2, 3), 1e300)),
+        lambda: lidarcal.write_points(_scratch() / "a.ply", np.full((2, 3), 1e300)),
         ValueError,
         "does not fit the float32",
     ),
     Case(
         "write: duplicate names",
         lambda: lidarcal.write_points(
-            Path(tempfile.mkdtemp()) / "a.pcd", np.zeros((2, 3)), ["x", "x", "z"]
+            _scratch() / "a.pcd", np.zeros((2, 3)), ["x", "x", "z"]
         ),
         ValueError,
         "appears twice",
     ),
     Case(
         "write: NaN",
-        lambda: lidarcal.write_points(Path(tempfile.mkdtemp()) / "a.pcd", np.full((2, 3), np.nan)),
+        lambda: lidarcal.write_points(_scratch() / "a.pcd", np.full((2, 3), np.nan)),
         ValueError,
         "non-finite",
     ),
     Case(
         "write: 1-D",
-        lambda: lidarcal.write_points(Path(tempfile.mkdtemp()) / "a.pcd", np.zeros(3)),
+        lambda: lidarcal.write_points(_scratch() / "a.pcd", np.zeros(3)),
         ValueError,
         "2-D array (N, K) with K >= 3",
     ),
@@ -709,7 +718,7 @@ CASES: list[Case] = [
     ),
     Case(
         "write: unknown extension",
-        lambda: lidarcal.write_points(Path(tempfile.mkdtemp()) / "a.las", np.zeros((2, 3))),
+        lambda: lidarcal.write_points(_scratch() / "a.las", np.zeros((2, 3))),
         ValueError,
         "unknown point-cloud extension",
     ),
