@@ -692,9 +692,7 @@ CASES: list[Case] = [
     ),
     Case(
         "write: duplicate names",
-        lambda: lidarcal.write_points(
-            _scratch() / "a.pcd", np.zeros((2, 3)), ["x", "x", "z"]
-        ),
+        lambda: lidarcal.write_points(_scratch() / "a.pcd", np.zeros((2, 3)), ["x", "x", "z"]),
         ValueError,
         "appears twice",
     ),
