@@ -5,7 +5,7 @@ use nalgebra::Isometry3;
 use super::choose::MAX_POLE_RMSE;
 use super::hypotheses::*;
 use super::options::*;
-use crate::check::{CheckReport, PreparedPair, MAX_HELD_CORRECTION};
+use crate::check::{clearer, CheckReport, PreparedPair, MAX_HELD_CORRECTION};
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::pose_error;
 
@@ -27,6 +27,7 @@ pub(super) fn settle(
     pose: Isometry3<f64>,
     pole_rmse: Vec<f64>,
     level: impl Fn(&Isometry3<f64>) -> Isometry3<f64>,
+    reground: impl Fn(&Isometry3<f64>) -> Option<Isometry3<f64>>,
     options: &PoleOptions,
 ) -> Result<Settled> {
     // The poles hold the pose only as well as a few hundred tape points can: two near-parallel
@@ -97,7 +98,55 @@ pub(super) fn settle(
             }
         }
     };
+    // Step 7b: the scene's re-alignment can settle a tilted pose where it is; a second start with
+    // the ground's tilt and height is taken when it settles clearly clearer of free space.
+    if options.axis_fit == AxisFit::Cylinder {
+        if let Some(start) = reground(&settled.pose) {
+            if let Some(better) =
+                from_ground(&pair, clouds, matches, &pose, &start, &settled, options)?
+            {
+                return Ok(better);
+            }
+        }
+    }
     Ok(settled)
+}
+
+/// The scene's re-alignment from `start` (the ground's tilt and height applied to the settled
+/// pose), when it stays within [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`] of the pole
+/// pose `pose`, the poles still fit there, it passes the check without a counted move beyond
+/// [`MAX_HELD_CORRECTION`], and it is [`clearer`] of the other sensor's free space than the
+/// settled pose. On pole scene 16022 the settled pose was 0.95 degrees and 13 cm off with 14-15 %
+/// of the points in free space; from the ground's start the scene settles 0.05 degrees and 1.4 cm
+/// off with 1.1 %.
+fn from_ground(
+    pair: &PreparedPair,
+    clouds: &Clouds<'_>,
+    matches: &[(usize, usize, i8)],
+    pose: &Isometry3<f64>,
+    start: &Isometry3<f64>,
+    settled: &Settled,
+    options: &PoleOptions,
+) -> Result<Option<Settled>> {
+    let aligned = pair.check(start)?.aligned;
+    let (angle, distance) = pose_error(&aligned, pose);
+    if angle > SCENE_REFINE_ANGLE || distance > SCENE_REFINE_DISTANCE {
+        return Ok(None);
+    }
+    let rms = per_pole_rms(clouds, matches, options.loss, &aligned)?;
+    if !rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE) {
+        return Ok(None);
+    }
+    let check = pair.check(&aligned)?;
+    let passes = check.refusal().is_none() && !check.moved_beyond_held();
+    Ok(
+        (passes && clearer(check.free_share(), settled.check.free_share())).then_some(Settled {
+            pose: aligned,
+            pole_rmse: rms,
+            check,
+            scene_aligned: true,
+        }),
+    )
 }
 
 /// A pole pose that passes the check but that the check's re-alignment on the whole scene moves
