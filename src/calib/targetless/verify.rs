@@ -233,6 +233,11 @@ impl<'a> Verifier<'a> {
         }
     }
 
+    /// The full verification score of `pose`, without moving it.
+    pub(super) fn score_full(&self, pose: Isometry3<f64>) -> Verified {
+        self.score(pose, &self.full)
+    }
+
     fn icp_then_score(
         &self,
         start: &Isometry3<f64>,
