@@ -99,11 +99,12 @@ pub(super) fn settle(
         }
     };
     // Step 7b: the scene's re-alignment can settle a tilted pose where it is; a second start with
-    // the ground's tilt and height is taken when it settles clearly clearer of free space.
+    // the ground's tilt and height is taken when it settles clearly clearer of free space. It is
+    // only a second chance: if it cannot be judged, the settled pose stands.
     if options.axis_fit == AxisFit::Cylinder {
         if let Some(start) = reground(&settled.pose) {
-            if let Some(better) =
-                from_ground(&pair, clouds, matches, &pose, &start, &settled, options)?
+            if let Ok(Some(better)) =
+                from_ground(&pair, clouds, matches, &pose, &start, &settled, options)
             {
                 return Ok(better);
             }
