@@ -53,12 +53,9 @@ pub(super) fn level_on_ground(
     axes_reference: &[Line],
     ground: [Option<Plane>; 2],
 ) -> Isometry3<f64> {
-    let [Some(ground_ref), Some(ground_tgt)] = ground else {
+    let Some((reference, mapped)) = grounds_under(pose, ground) else {
         return *pose;
     };
-    let origin = Point3::origin();
-    let reference = ground_ref.oriented_toward(&origin);
-    let mapped = ground_tgt.transformed(pose).oriented_toward(&origin);
     let (n, m) = (reference.normal.into_inner(), mapped.normal.into_inner());
     if n.dot(&m) < MAX_GROUND_ANGLE.cos() {
         return *pose;
@@ -85,6 +82,19 @@ pub(super) fn level_on_ground(
     levelled
 }
 
+/// The reference's ground and the target's mapped by `pose`, each with its normal toward the
+/// reference sensor; `None` when either cloud has no ground.
+fn grounds_under(pose: &Isometry3<f64>, ground: [Option<Plane>; 2]) -> Option<(Plane, Plane)> {
+    let [Some(reference), Some(target)] = ground else {
+        return None;
+    };
+    let origin = Point3::origin();
+    Some((
+        reference.oriented_toward(&origin),
+        target.transformed(pose).oriented_toward(&origin),
+    ))
+}
+
 /// Smallest angle (radians) between the two grounds under a settled pole pose for the ground to
 /// be tried as a second start ([`ground_start`]): 0.2 degrees, well under what the check detects
 /// (0.5 degrees), so only a tilt worth correcting costs the extra check.
@@ -104,15 +114,11 @@ pub(super) fn ground_start(
     axes_reference: &[Line],
     ground: [Option<Plane>; 2],
 ) -> Option<Isometry3<f64>> {
-    let [Some(ground_ref), Some(ground_tgt)] = ground else {
-        return None;
-    };
+    let (reference, mapped) = grounds_under(pose, ground)?;
     if axes_reference.is_empty() {
         return None;
     }
-    let origin = Point3::origin();
-    let n = ground_ref.oriented_toward(&origin).normal;
-    let m = ground_tgt.transformed(pose).oriented_toward(&origin).normal;
+    let (n, m) = (reference.normal, mapped.normal);
     let tilt = n.angle(&m);
     if !(MIN_GROUND_TILT..=MAX_GROUND_ANGLE).contains(&tilt) {
         return None;

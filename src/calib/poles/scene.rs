@@ -78,22 +78,8 @@ pub(super) fn settle(
             if options.axis_fit != AxisFit::Cylinder {
                 return Err(refused);
             }
-            let aligned = first.aligned;
-            let (angle, distance) = pose_error(&aligned, &pose);
-            if angle > SCENE_REFINE_ANGLE || distance > SCENE_REFINE_DISTANCE {
-                return Err(refused);
-            }
-            let rms = per_pole_rms(clouds, matches, options.loss, &aligned)?;
-            if !rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE) {
-                return Err(refused);
-            }
-            match pair.check(&aligned)? {
-                c if c.failure.is_none() => Settled {
-                    pose: aligned,
-                    pole_rmse: rms,
-                    check: c,
-                    scene_aligned: true,
-                },
+            match scene_settled(&pair, clouds, matches, &pose, first.aligned, options)? {
+                Some(s) if s.check.failure.is_none() => s,
                 _ => return Err(refused),
             }
         }
@@ -113,9 +99,36 @@ pub(super) fn settle(
     Ok(settled)
 }
 
+/// `aligned`, a re-alignment of the pole pose `pose` on the scene, with its per-pole RMS and its
+/// check, when it stays within [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`] of `pose`
+/// and every matched pole still lies within [`MAX_POLE_RMSE`] of its axis there; `None`
+/// otherwise. Whether the check passes is for the caller to judge.
+fn scene_settled(
+    pair: &PreparedPair,
+    clouds: &Clouds<'_>,
+    matches: &[(usize, usize, i8)],
+    pose: &Isometry3<f64>,
+    aligned: Isometry3<f64>,
+    options: &PoleOptions,
+) -> Result<Option<Settled>> {
+    let (angle, distance) = pose_error(&aligned, pose);
+    if angle > SCENE_REFINE_ANGLE || distance > SCENE_REFINE_DISTANCE {
+        return Ok(None);
+    }
+    let rms = per_pole_rms(clouds, matches, options.loss, &aligned)?;
+    if !rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE) {
+        return Ok(None);
+    }
+    Ok(Some(Settled {
+        pose: aligned,
+        pole_rmse: rms,
+        check: pair.check(&aligned)?,
+        scene_aligned: true,
+    }))
+}
+
 /// The scene's re-alignment from `start` (the ground's tilt and height applied to the settled
-/// pose), when it stays within [`SCENE_REFINE_ANGLE`] and [`SCENE_REFINE_DISTANCE`] of the pole
-/// pose `pose`, the poles still fit there, it passes the check without a counted move beyond
+/// pose), when [`scene_settled`] keeps it, it passes the check without a counted move beyond
 /// [`MAX_HELD_CORRECTION`], and it is [`clearer`] of the other sensor's free space than the
 /// settled pose. On pole scene 16022 the settled pose was 0.95 degrees and 13 cm off with 14-15 %
 /// of the points in free space; from the ground's start the scene settles 0.05 degrees and 1.4 cm
@@ -130,22 +143,11 @@ fn from_ground(
     options: &PoleOptions,
 ) -> Result<Option<Settled>> {
     let aligned = pair.check(start)?.aligned;
-    let (angle, distance) = pose_error(&aligned, pose);
-    if angle > SCENE_REFINE_ANGLE || distance > SCENE_REFINE_DISTANCE {
-        return Ok(None);
-    }
-    let rms = per_pole_rms(clouds, matches, options.loss, &aligned)?;
-    if !rms.iter().all(|r| r.is_finite() && *r <= MAX_POLE_RMSE) {
-        return Ok(None);
-    }
-    let check = pair.check(&aligned)?;
-    let passes = check.refusal().is_none() && !check.moved_beyond_held();
     Ok(
-        (passes && clearer(check.free_share(), settled.check.free_share())).then_some(Settled {
-            pose: aligned,
-            pole_rmse: rms,
-            check,
-            scene_aligned: true,
+        scene_settled(pair, clouds, matches, pose, aligned, options)?.filter(|s| {
+            s.check.refusal().is_none()
+                && !s.check.moved_beyond_held()
+                && clearer(s.check.free_share(), settled.check.free_share())
         }),
     )
 }

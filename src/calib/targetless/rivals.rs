@@ -153,7 +153,7 @@ impl<'a> Contest<'a> {
         // Moved by its re-alignment: judged again where that settles it, and ruled out there
         // only by evidence against it, never for want of evidence when it fits as well as the
         // best pose.
-        let settled = self.checks.pair()?.check(&c.aligned)?;
+        let settled = self.settled_by_check(c)?;
         Ok(match settled.verdict {
             Verdict::Consistent => false,
             Verdict::Unverifiable => !self.fits_as_well(&settled)?,
@@ -161,8 +161,8 @@ impl<'a> Contest<'a> {
         })
     }
 
-    /// The check `c` of a restart, or, when it fails only because its re-alignment moves the
-    /// pose, the check where that re-alignment settles it.
+    /// The check `c` of a pose, or, when it fails only because its re-alignment moves the pose,
+    /// the check where that re-alignment settles it.
     fn settled_by_check(&self, c: CheckReport) -> Result<CheckReport> {
         if c.verdict != Verdict::Inconsistent || self.fails_outright(&c) {
             return Ok(c);
@@ -286,9 +286,15 @@ impl<'a> Contest<'a> {
         verifier: &Verifier<'_>,
         start: &Isometry3<f64>,
     ) -> Result<Option<(Verified, CheckReport)>> {
-        let Some(v) = verifier.settle(start) else {
-            return Ok(None);
-        };
+        match verifier.settle(start) {
+            Some(v) => self.elsewhere(v),
+            None => Ok(None),
+        }
+    }
+
+    /// `v` and its check, when it lies within max_translation at a pose distinct from the best
+    /// one; `None` otherwise.
+    fn elsewhere(&self, v: Verified) -> Result<Option<(Verified, CheckReport)>> {
         if !self.within(&v)
             || same_pose(&v.pose, &self.best.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE)
         {
@@ -305,15 +311,8 @@ impl<'a> Contest<'a> {
         verifier: &Verifier<'_>,
         start: &Isometry3<f64>,
     ) -> Result<Option<(Verified, CheckReport)>> {
-        let pair = self.checks.pair()?;
-        let v = verifier.score_full(pair.check(start)?.aligned);
-        if !self.within(&v)
-            || same_pose(&v.pose, &self.best.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE)
-        {
-            return Ok(None);
-        }
-        let c = pair.check(&v.pose)?;
-        Ok(Some((v, c)))
+        let aligned = self.checks.pair()?.check(start)?.aligned;
+        self.elsewhere(verifier.score_full(aligned))
     }
 
     /// Whether `r` ties with the best pose and is not ruled out.
