@@ -72,7 +72,8 @@
 //!    cannot tell from the best pose, makes it ambiguous (a colonnade or a row of boxes one
 //!    period off). Such a best pose is also restarted 0.2 and 0.4 m either way along the largest
 //!    reference plane's normal and settled: a restart that passes the check and keeps the free
-//!    space clearly clearer makes it ambiguous too (the ground matched to a pavement beside it).
+//!    space clearly clearer makes it ambiguous too (the ground matched to a pavement beside it),
+//!    unless the final pose of step 5 keeps it as clear (within the check's resolution).
 //!    **Challengers**: hypotheses up to [`TargetlessOptions::challenger_range`] times
 //!    [`TargetlessOptions::max_translation`] away are verified as well but never returned. When
 //!    one verifies best, the scene says the sensors are further apart than allowed and the
@@ -145,7 +146,9 @@ use self::hypotheses::{
 };
 use self::observability::{observability, Observability};
 use self::refine::{final_icp, refine_planes, PlaneRefinement};
-use self::rivals::{ambiguity_message, clearer_contender, find_rival, Contest, Rivalry};
+use self::rivals::{
+    ambiguity_message, clearer_contender, find_rival, nudge_stands, Contest, Rival, Rivalry,
+};
 use self::segment::{check_cloud, prepare, Prepared};
 use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
 use crate::check::{LazyCheck, MAX_HELD_CORRECTION};
@@ -256,6 +259,9 @@ pub fn calibrate_targetless(
     let refined = refine_planes(&reference_ds, &target_ds, &top.pose, options)?;
     clock.lap("refine");
     let contenders = pool.iter().map(|(_, v)| *v);
+    // A restart along the largest plane's normal is weighed against the final pose below: the
+    // final ICP runs as for a result that is not ambiguous.
+    let nudged = matches!(choice.rivalry.rival, Some(Rival::ClearerNudge { .. }));
     let (pose, icp) = final_icp(
         &verifier,
         &checks,
@@ -263,8 +269,10 @@ pub fn calibrate_targetless(
         &top.pose,
         contenders,
         options,
-        ambiguity.is_some(),
+        ambiguity.is_some() && !nudged,
     )?;
+    let nudge_fell = nudged && !nudge_stands(&pose, &choice.rivalry, &checks)?;
+    let ambiguity = ambiguity.filter(|_| !nudge_fell);
     clock.lap("icp");
 
     // Step 6: observability, range and the last refusals; the check certifies the result.
@@ -293,7 +301,7 @@ pub fn calibrate_targetless(
         pairs,
         (refined.report, icp),
     );
-    details.ambiguous |= clearer.is_some();
+    details.ambiguous = (details.ambiguous && !nudge_fell) || clearer.is_some();
     Ok(TargetlessCalibration {
         reference_from_target: pose,
         initial_reference_from_target: choice.winner.pose,
