@@ -414,6 +414,19 @@ impl PreparedPair {
         self.free_space(reference_from_target).worse()
     }
 
+    /// Where the check's local re-alignment from `reference_from_target` ends: the report's
+    /// [`aligned`](CheckReport::aligned) without the rest of the check, for a method that uses
+    /// the re-alignment as a settling (the agreement, free space and observability are half the
+    /// work of a check).
+    ///
+    /// Errors: [`Error::InvalidInput`] for a non-finite transform.
+    pub(crate) fn aligned(&self, reference_from_target: &Isometry3<f64>) -> Result<Isometry3<f64>> {
+        ensure_transform(reference_from_target)?;
+        Ok(self
+            .realign(reference_from_target)?
+            .map_or(*reference_from_target, |icp| icp.pose))
+    }
+
     /// [`check`] on the prepared pair.
     ///
     /// Errors: [`Error::InvalidInput`] for a non-finite transform.

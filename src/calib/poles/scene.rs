@@ -142,7 +142,7 @@ fn from_ground(
     settled: &Settled,
     options: &PoleOptions,
 ) -> Result<Option<Settled>> {
-    let aligned = pair.check(start)?.aligned;
+    let aligned = pair.aligned(start)?;
     Ok(
         scene_settled(pair, clouds, matches, pose, aligned, options)?.filter(|s| {
             s.check.refusal().is_none()

@@ -311,7 +311,7 @@ impl<'a> Contest<'a> {
         verifier: &Verifier<'_>,
         start: &Isometry3<f64>,
     ) -> Result<Option<(Verified, CheckReport)>> {
-        let aligned = self.checks.pair()?.check(start)?.aligned;
+        let aligned = self.checks.pair()?.aligned(start)?;
         self.elsewhere(verifier.score_full(aligned))
     }
 
