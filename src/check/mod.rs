@@ -485,3 +485,29 @@ impl PreparedPair {
         })
     }
 }
+
+#[cfg(all(test, feature = "sim"))]
+mod tests {
+    use super::*;
+    use crate::sim::scenes::{street_scene, StreetOptions};
+    use nalgebra::Translation3;
+
+    #[test]
+    fn the_realignment_alone_ends_where_the_check_does() {
+        let scene = street_scene(&StreetOptions::default()).unwrap();
+        let (reference, target) = (scene.reference.positions(), scene.target.positions());
+        let pair = PreparedPair::new(&reference, &target, &CheckOptions::default()).unwrap();
+        let truth = scene.reference_from_target;
+        // The truth, and a pose 25 cm up that the re-alignment carries back.
+        for pose in [truth, Translation3::new(0.0, 0.0, 0.25) * truth] {
+            let aligned = pair.aligned(&pose).unwrap();
+            assert_eq!(aligned, pair.check(&pose).unwrap().aligned);
+        }
+        let moved = pair
+            .aligned(&(Translation3::new(0.0, 0.0, 0.25) * truth))
+            .unwrap();
+        assert!((moved.translation.vector - truth.translation.vector).norm() < 0.05);
+        let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
+        assert!(matches!(pair.aligned(&nan), Err(Error::InvalidInput(_))));
+    }
+}
