@@ -242,6 +242,8 @@ MUST_SOLVE = [
     ("corner", 188, "targetless"),
     ("corner", 14184, "targetless"),
     ("poles", 12032, "targetless"),
+    ("corner", 14042, "planes"),
+    ("corner", 18192, "planes"),
 ]
 
 

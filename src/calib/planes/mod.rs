@@ -59,7 +59,11 @@
 //!    planes' RANSAC scores only hypotheses parallel to a plane of the corner, an alternative is
 //!    checked only when it could be chosen or rival the result (distinct, overlapping at least as
 //!    much, not clearly more in free space), and the clouds are prepared for the check and
-//!    indexed for step 8 once for every alternative.
+//!    indexed for step 8 once for every alternative. When only the check's re-alignment points
+//!    elsewhere (it moved the result beyond the standalone check's 0.5 degrees / 6 cm: a pavement
+//!    taken for the ground in one cloud), the same alternatives are sought, and one that lies
+//!    within 0.5 degrees / 5 cm of where the re-alignment went, passes the check and stays there
+//!    replaces the result; otherwise the result stands.
 
 use std::cell::OnceCell;
 
