@@ -244,6 +244,7 @@ MUST_SOLVE = [
     ("poles", 12032, "targetless"),
     ("corner", 14042, "planes"),
     ("corner", 18192, "planes"),
+    ("corridor", 20060, "planes"),
 ]
 
 

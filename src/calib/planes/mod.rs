@@ -63,7 +63,10 @@
 //!    elsewhere (it moved the result beyond the standalone check's 0.5 degrees / 6 cm: a pavement
 //!    taken for the ground in one cloud), the same alternatives are sought, and one that lies
 //!    within 0.5 degrees / 5 cm of where the re-alignment went, passes the check and stays there
-//!    replaces the result; otherwise the result stands.
+//!    replaces the result; otherwise the result stands. When the check finds under half of the
+//!    target's points on the reference's surfaces (a room whose far wall is skewed shows no
+//!    opposed sheet), alternatives turned more than 10 degrees from the result are sought and
+//!    judged as above, without the enclosed scene's 5 % rule.
 
 use std::cell::OnceCell;
 
