@@ -161,7 +161,7 @@ const PACKED_HALF_RANGE: u64 = 1 << (PACKED_BITS - 1);
 /// `owners`) each point's voxel, for the voxel key `key_of` gives each point; `None` as soon as
 /// it gives `None`.
 #[allow(clippy::type_complexity)]
-fn group_by_key<K: std::hash::Hash + Eq>(
+fn group_by_key<K: std::hash::Hash + Eq + Clone>(
     points: &[Point3<f64>],
     owners: bool,
     key_of: impl Fn(&Point3<f64>) -> Result<Option<K>>,
@@ -176,15 +176,25 @@ fn group_by_key<K: std::hash::Hash + Eq>(
         rustc_hash::FxHashMap::with_capacity_and_hasher(capacity, Default::default());
     let mut sums: Vec<(Vector3<f64>, usize)> = Vec::with_capacity(capacity);
     let mut owner = Vec::with_capacity(if owners { points.len() } else { 0 });
+    // The voxel of the previous point: a scan's consecutive returns often share one (neighbours
+    // along a ring at short range), and that skips the map.
+    let mut last: Option<(K, usize)> = None;
     for p in points {
         let Some(key) = key_of(p)? else {
             return Ok(None);
         };
-        let next = sums.len();
-        let slot = *index.entry(key).or_insert(next);
-        if slot == next {
-            sums.push((Vector3::zeros(), 0));
-        }
+        let slot = match &last {
+            Some((k, slot)) if *k == key => *slot,
+            _ => {
+                let next = sums.len();
+                let slot = *index.entry(key.clone()).or_insert(next);
+                if slot == next {
+                    sums.push((Vector3::zeros(), 0));
+                }
+                last = Some((key, slot));
+                slot
+            }
+        };
         if let Some(s) = sums.get_mut(slot) {
             s.0 += p.coords;
             s.1 += 1;
@@ -614,14 +624,17 @@ pub fn point_to_plane_icp_with_normals(
     // start stay out: only a pose moving by more than that distance could pair them, and the
     // search for their nearest point and their normal is most of the work on a partial overlap.
     let reach = 2.0 * options.max_distance;
-    let samples: Vec<Sample> = (0..points.len())
-        .step_by(stride)
-        .filter_map(|i| {
-            let p = *points.get(i)?;
-            reference.any_within(&(initial * p), reach).then_some(())?;
-            Some((p, Some(target.normal(i)?)))
-        })
-        .collect();
+    // Each sample's test and normal are independent (a normal is a pure function of the
+    // cloud): in parallel, in order. Computing the target's normals is most of a short ICP.
+    let indices: Vec<usize> = (0..points.len()).step_by(stride).collect();
+    let samples: Vec<Sample> = crate::par_map(&indices, |&i| {
+        let p = *points.get(i)?;
+        reference.any_within(&(initial * p), reach).then_some(())?;
+        Some((p, Some(target.normal(i)?)))
+    })
+    .into_iter()
+    .flatten()
+    .collect();
     icp_on_samples(
         reference,
         &samples,

@@ -42,6 +42,8 @@ const MIN_VISIBILITY_RANGE: f64 = 3.0;
 const VIOLATION_MARGIN: f64 = 0.5;
 /// Relative part of that margin (share of the nearest return's range): bins widen with range.
 const VIOLATION_RELATIVE_MARGIN: f64 = 0.05;
+/// Scans of at least this many points are binned in two halves side by side.
+const PARALLEL_POINTS: usize = 20_000;
 
 /// The nearest range per azimuth/elevation bin of one scan, around its sensor (see the module
 /// docs).
@@ -81,29 +83,53 @@ impl RangeImage {
         };
         // The row is monotone in z / r: the band of rows comes from the extreme ratios, before
         // any bin is stored.
-        let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
-        for p in points {
-            let r = p.coords.norm();
-            if r >= MIN_VISIBILITY_RANGE {
-                low = low.min(p.z / r);
-                high = high.max(p.z / r);
+        let band = |chunk: &[Point3<f64>]| {
+            let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+            for p in chunk {
+                let r = p.coords.norm();
+                if r >= MIN_VISIBILITY_RANGE {
+                    low = low.min(p.z / r);
+                    high = high.max(p.z / r);
+                }
             }
-        }
+            (low, high)
+        };
+        // Minima and maxima do not depend on the order they are taken in: the halves of a
+        // large scan are binned side by side (the image of a 120k-point scan took 4 ms alone)
+        // and give the image one pass would.
+        let halves = points.split_at(if points.len() >= PARALLEL_POINTS {
+            points.len() / 2
+        } else {
+            0
+        });
+        let ((low_a, high_a), (low_b, high_b)) = crate::join(|| band(halves.0), || band(halves.1));
+        let (low, high) = (low_a.min(low_b), high_a.max(high_b));
         if low > high {
             return Ok(image);
         }
         let (first, last) = (image.row(low), image.row(high));
         image.first_row = first;
-        image.nearest = vec![f32::INFINITY; columns * (last - first + 1)];
-        for p in points {
-            let r = p.coords.norm();
-            if r < MIN_VISIBILITY_RANGE {
-                continue;
+        let size = columns * (last - first + 1);
+        let fill = |chunk: &[Point3<f64>]| {
+            let mut nearest = vec![f32::INFINITY; if chunk.is_empty() { 0 } else { size }];
+            for p in chunk {
+                let r = p.coords.norm();
+                if r < MIN_VISIBILITY_RANGE {
+                    continue;
+                }
+                if let Some(slot) = image.bin(p, r, size).and_then(|b| nearest.get_mut(b)) {
+                    *slot = slot.min(r as f32);
+                }
             }
-            if let Some(slot) = image.bin(p, r).and_then(|b| image.nearest.get_mut(b)) {
-                *slot = slot.min(r as f32);
-            }
+            nearest
+        };
+        // The second half is never empty (the band above has a point); the first is when the
+        // scan is small.
+        let (mut nearest, first_half) = crate::join(|| fill(halves.1), || fill(halves.0));
+        for (x, y) in nearest.iter_mut().zip(&first_half) {
+            *x = x.min(*y);
         }
+        image.nearest = nearest;
         Ok(image)
     }
 
@@ -113,13 +139,13 @@ impl RangeImage {
         ((elevation / self.resolution) as usize).min(self.rows - 1)
     }
 
-    /// The index in `nearest` of the bin of `p` at range `r`, `None` outside the stored rows.
-    fn bin(&self, p: &Point3<f64>, r: f64) -> Option<usize> {
+    /// The index in `nearest` of the bin of `p` at range `r`, `None` outside the `stored` bins.
+    fn bin(&self, p: &Point3<f64>, r: f64, stored: usize) -> Option<usize> {
         if r <= 0.0 {
             return None;
         }
         let row = self.row(p.z / r).checked_sub(self.first_row)?;
-        if row * self.columns >= self.nearest.len() {
+        if row * self.columns >= stored {
             return None;
         }
         let azimuth = p.y.atan2(p.x) + std::f64::consts::PI;
@@ -134,7 +160,7 @@ impl RangeImage {
         if !r.is_finite() || r < MIN_VISIBILITY_RANGE {
             return None;
         }
-        let near = f64::from(*self.nearest.get(self.bin(p, r)?)?);
+        let near = f64::from(*self.nearest.get(self.bin(p, r, self.nearest.len())?)?);
         if !near.is_finite() {
             return None;
         }
@@ -194,6 +220,35 @@ mod tests {
         let image = RangeImage::new(&[Point3::new(0.0, 0.0, 10.0)], 0.02).unwrap();
         assert_eq!(image.violation(&Point3::new(0.0, 0.0, 5.0)), Some(true));
         assert_eq!(image.violation(&Point3::new(0.0, 0.0, -5.0)), None);
+    }
+
+    #[test]
+    fn a_large_scan_binned_in_halves_gives_the_one_pass_image() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let scan: Vec<Point3<f64>> = (0..(PARALLEL_POINTS + 5001))
+            .map(|_| {
+                Point3::new(
+                    rng.random_range(-40.0..40.0),
+                    rng.random_range(-40.0..40.0),
+                    rng.random_range(-3.0..3.0),
+                )
+            })
+            .collect();
+        let image = RangeImage::new(&scan, RangeImage::DEFAULT_RESOLUTION).unwrap();
+        // The nearest range of each bin in one pass over the scan, in order.
+        let mut nearest = vec![f32::INFINITY; image.nearest.len()];
+        for p in &scan {
+            let r = p.coords.norm();
+            if r < MIN_VISIBILITY_RANGE {
+                continue;
+            }
+            if let Some(b) = image.bin(p, r, nearest.len()) {
+                nearest[b] = nearest[b].min(r as f32);
+            }
+        }
+        assert!(nearest.iter().filter(|r| r.is_finite()).count() > 1000);
+        assert_eq!(image.nearest, nearest);
     }
 
     #[test]

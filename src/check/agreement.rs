@@ -119,20 +119,20 @@ fn residuals(
     pose: &Isometry3<f64>,
     overlap_distance: f64,
 ) -> (usize, Vec<f64>) {
-    let mut overlap = 0;
-    let mut out = Vec::with_capacity(points.len());
-    for p in points {
+    // Per point: `None` outside the overlap, `Some(None)` in it without a normal. Each point is
+    // independent (a normal is a pure function of the cloud), so they are taken in parallel,
+    // in order: the normals computed here are most of a check's work after its preparation.
+    let found = crate::par_map(points, |p| {
         let q = pose * p;
-        let Some((i, _)) = surface.nearest(&q, overlap_distance) else {
-            continue;
+        let (i, _) = surface.nearest(&q, overlap_distance)?;
+        let residual = match (surface.normal(i), surface.points().get(i)) {
+            (Some(n), Some(s)) => Some(n.dot(&(q - s)).abs()),
+            _ => None,
         };
-        overlap += 1;
-        let (Some(n), Some(s)) = (surface.normal(i), surface.points().get(i)) else {
-            continue;
-        };
-        out.push(n.dot(&(q - s)).abs());
-    }
-    (overlap, out)
+        Some(residual)
+    });
+    let overlap = found.iter().filter(|f| f.is_some()).count();
+    (overlap, found.into_iter().flatten().flatten().collect())
 }
 
 /// Share of `points` (their own sensor's frame) that land in `image`'s free space once mapped by

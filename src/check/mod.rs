@@ -435,8 +435,7 @@ impl PreparedPair {
         let t = reference_from_target;
         let inverse = t.inverse();
         // Agreement both ways at the given pose, and free space both ways.
-        let agreement = self.agreement(t);
-        let free_space = self.free_space(t);
+        let (agreement, free_space) = crate::join(|| self.agreement(t), || self.free_space(t));
         // Local re-alignment and observability.
         let icp = self.realign(t)?;
         let correction = Correction::new(icp.as_ref(), t, &inverse);
