@@ -179,9 +179,17 @@ impl<'a> Verifier<'a> {
         target: &'a [Point3<f64>],
         final_icp: IcpOptions,
     ) -> Result<Self> {
-        let surface = SurfaceCloud::new(reference.to_vec())?;
-        let reference_image = RangeImage::new(reference, RangeImage::DEFAULT_RESOLUTION)?;
-        let target_image = RangeImage::new(target, RangeImage::DEFAULT_RESOLUTION)?;
+        // Three independent builds, side by side (the errors in this order).
+        let (surface, (reference_image, target_image)) = crate::join(
+            || SurfaceCloud::new(reference.to_vec()),
+            || {
+                crate::join(
+                    || RangeImage::new(reference, RangeImage::DEFAULT_RESOLUTION),
+                    || RangeImage::new(target, RangeImage::DEFAULT_RESOLUTION),
+                )
+            },
+        );
+        let (surface, reference_image, target_image) = (surface?, reference_image?, target_image?);
         Ok(Verifier {
             surface,
             target,
