@@ -366,17 +366,10 @@ impl PreparedPair {
         // Each cloud is validated on its side; the errors keep their order (the reference's
         // points, the target's, then the reference's side, the target's).
         let side = |what: &str, points: &[Point3<f64>]| {
-            let valid = ensure_points(what, points);
-            let side = valid.is_ok().then(|| Side::new(points, options));
-            (valid, side)
+            ensure_points(what, points).map(|()| Side::new(points, options))
         };
-        let ((valid_r, r), (valid_g, g)) =
-            crate::join(|| side("reference", reference), || side("target", target));
-        valid_r?;
-        valid_g?;
-        let (Some(r), Some(g)) = (r, g) else {
-            return Err(Error::Numerical("a valid cloud was not prepared".into()));
-        };
+        let (r, g) = crate::join(|| side("reference", reference), || side("target", target));
+        let (r, g) = (r?, g?);
         let (r, g) = (r?, g?);
         // The noise scale comes from each cloud alone (how thick its surfaces are), never from
         // the residuals under the pose being checked: a pose 10 cm off would otherwise measure a
