@@ -130,6 +130,7 @@
 mod hypotheses;
 mod observability;
 mod options;
+mod period;
 mod refine;
 mod rivals;
 mod segment;
@@ -288,6 +289,10 @@ pub fn calibrate_targetless(
         let message = ambiguity_message(&top, &rivalry, options.max_translation);
         return Err(Error::calibration(FailureKind::Ambiguous, message));
     }
+    let repeated = period_twin(&pose, &check, &reference_ds, &checks)?;
+    if let Some(message) = repeated.as_ref().filter(|_| options.refuse_ambiguous) {
+        return Err(Error::calibration(FailureKind::Ambiguous, message.clone()));
+    }
     let planes = matched_planes(&reference_ds, &target_ds, &refined, &pose);
     clock.lap("check");
     let counts = [enumerated, candidates.len(), chosen.len()];
@@ -301,7 +306,8 @@ pub fn calibrate_targetless(
         pairs,
         (refined.report, icp),
     );
-    details.ambiguous = (details.ambiguous && !nudge_fell) || clearer.is_some();
+    details.ambiguous =
+        (details.ambiguous && !nudge_fell) || clearer.is_some() || repeated.is_some();
     Ok(TargetlessCalibration {
         reference_from_target: pose,
         initial_reference_from_target: choice.winner.pose,
@@ -314,6 +320,38 @@ pub fn calibrate_targetless(
         timings: clock.finish(),
         details,
     })
+}
+
+/// The reason the result is ambiguous when, shifted by a period of the reference's structure (a
+/// colonnade, a row of identical boxes), it fits the clouds as well ([`period::period_twin`]);
+/// `None` otherwise.
+fn period_twin(
+    pose: &Isometry3<f64>,
+    check: &CheckReport,
+    reference: &Prepared,
+    checks: &LazyCheck<'_>,
+) -> Result<Option<String>> {
+    let periods = period::base_planes(&reference.features)
+        .iter()
+        .flat_map(|plane| period::periods(&reference.points, plane))
+        .collect::<Vec<_>>();
+    let Some((shift, twin)) = period::period_twin(pose, check, &periods, checks.pair()?)? else {
+        return Ok(None);
+    };
+    Ok(Some(format!(
+        "ambiguous: the reference repeats itself every {:.2} m (a colonnade, a row of posts \
+             or boxes), and the result shifted by that much fits the clouds as well: it agrees \
+             {:.0} % / {:.0} % where they overlap against {:.0} % / {:.0} %, with {:.1} % of the \
+             points in free space against {:.1} %; add structure both sensors see that breaks \
+             the repetition",
+        shift.norm(),
+        100.0 * twin.agreement,
+        100.0 * twin.reverse_agreement,
+        100.0 * check.agreement,
+        100.0 * check.reverse_agreement,
+        100.0 * twin.free_share(),
+        100.0 * check.free_share(),
+    )))
 }
 
 /// What step 4 chose: the winning hypothesis, its verified (polished) pose, and what the search

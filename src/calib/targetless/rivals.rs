@@ -11,7 +11,7 @@ use super::hypotheses::{
     in_range, same_pose, slide_peaks, SlideField, CLEARER_SLIDE_PEAKS, SLIDE_PEAKS,
 };
 use super::segment::{PlaneFeature, Prepared};
-use super::symmetry::{half_turns, third_turns};
+use super::symmetry::{half_turns, third_turns, MAX_CORNER_COSINE, SQUARE_CORNER_COSINE};
 use super::verify::{
     Verified, Verifier, AMBIGUITY_RATIO, CHALLENGER_AMBIGUITY_RATIO, DISTINCT_ANGLE,
     DISTINCT_DISTANCE, MAX_POLISHED,
@@ -32,7 +32,7 @@ pub(super) const SLID_FREE_SPACE_MIN: f64 = CLEARER_FREE_MIN;
 /// identical boxes (adversarial poles 170 and held-out repeated 1084, correct best poses) agreed
 /// 3-9 points less than the best pose one way or both, the twin of a bare room (held-out
 /// corridor 1087) as well.
-const TWIN_AGREEMENT_MARGIN: f64 = 0.02;
+pub(super) const TWIN_AGREEMENT_MARGIN: f64 = 0.02;
 
 /// A pose keeps the free space as clear as the best pose (for [`Contest::indistinguishable`])
 /// when it puts at most this share more of the points there: real scans put 3-5 % there at any
@@ -258,6 +258,34 @@ impl<'a> Contest<'a> {
         )
     }
 
+    /// A third turn `v` of a square corner ([`SQUARE_CORNER_COSINE`]) as a twin of a best pose
+    /// that passes the check with its free space clear: `v` is not inconsistent (it may be
+    /// unverifiable: a corner turned onto itself often overlaps where one direction is held
+    /// weakly) and fits as well ([`Contest::fits_as_well`]). Such a turn maps the corner's planes
+    /// onto one another, so the planes cannot tell the two apart, and when the rest of the scene
+    /// does not either the result is a guess. A fresh corner of the adversarial suite (corner
+    /// 21188, walls 87.3 degrees apart, the reference on its side) came back turned 120 degrees
+    /// and 4.5 m off, agreeing 60 % / 87 % with no point in free space; its third turn settled
+    /// near the truth, agreeing 88 % / 91 % with 1.8 % there, unverifiable, and scoring 77 % of
+    /// the best pose in the verification. A turn must score at least half the best pose
+    /// ([`CLEARER_CONTENDER_RATIO`]), as a contender must: the agreement is a share of the
+    /// overlap, which a turn can shrink to a corner of a room (a correct room of the suite,
+    /// corridor 21196, had a turn 94 degrees away agreeing as well over an overlap that explained
+    /// 8 % as much of the target).
+    fn square_twin(&self, v: &Verified) -> Result<Option<Rival>> {
+        if !self.within(v)
+            || pose_error(&v.pose, &self.best.pose).0 < RULED_OUT_TURN
+            || v.score < CLEARER_CONTENDER_RATIO * self.best.score
+        {
+            return Ok(None);
+        }
+        let c = self.checks.pair()?.check(&v.pose)?;
+        Ok(
+            (c.verdict != Verdict::Inconsistent && self.fits_as_well(&c)?)
+                .then_some(Rival::SquareTurn),
+        )
+    }
+
     /// Whether the pose whose check is `c` is one the check cannot tell from the best pose: both
     /// pass it, it agrees on its overlap both ways within [`TWIN_AGREEMENT_MARGIN`] of the best
     /// pose, and it keeps the free space as clear: it puts at most [`AS_CLEAR_MARGIN`] more of
@@ -349,6 +377,9 @@ pub(super) enum Rival {
     /// free space [`clearer`] ([`Contest::symmetry_rival`]): the shares of points the best pose and
     /// the turn put there.
     ClearerTurn { best_free: f64, free: f64 },
+    /// The best pose turned a third of a turn about a diagonal of a square corner, fitting as
+    /// well and not inconsistent, though perhaps unverifiable ([`Contest::square_twin`]).
+    SquareTurn,
 }
 
 /// What the search for a rival of the best pose found.
@@ -500,24 +531,39 @@ pub(super) fn half_turn_rival(
     points: &[Point3<f64>],
 ) -> Option<(Verified, Rival)> {
     let best = contest.best.pose;
-    // Third turns only against a best pose with points in free space, as slides: from a best
-    // pose with none (correct, corner 7088), a third turn settled half a turn away as a rival
-    // the verification ranked within 75 % of it.
-    let thirds = match contest.best_free_suspect() {
-        Ok(Some(_)) => third_turns(features),
-        _ => Vec::new(),
+    // Third turns against a best pose with points in free space, as slides: from a best pose
+    // with none (correct, corner 7088, walls 98.9 degrees apart), a third turn settled half a
+    // turn away as a rival the verification ranked within 75 % of it. Against any best pose when
+    // the corner is square within 5 degrees, but then only a turn that fits as well counts
+    // (`square_twin`).
+    let (thirds, square) = match contest.best_free_suspect() {
+        Ok(Some(_)) => (third_turns(features, MAX_CORNER_COSINE), false),
+        Ok(None) => (third_turns(features, SQUARE_CORNER_COSINE), true),
+        Err(_) => (Vec::new(), false),
     };
-    half_turns(features, points)
+    let halves = half_turns(features, points);
+    let halves_len = halves.len();
+    halves
         .into_iter()
         .chain(thirds)
-        .filter_map(|turn| verifier.settle(&(turn * best)))
-        .filter(|v| !same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE))
-        .find_map(|v| {
+        .enumerate()
+        .filter_map(|(i, turn)| {
+            verifier
+                .settle(&(turn * best))
+                .map(|v| (i >= halves_len, v))
+        })
+        .filter(|(_, v)| !same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE))
+        .find_map(|(third, v)| {
             // A check that fails to run counts the turn as a rival, the cautious way.
             if contest.rival(&v).unwrap_or(true) {
                 return Some((v, Rival::Tie));
             }
-            match contest.symmetry_rival(&v) {
+            let rival = if third && square {
+                contest.square_twin(&v)
+            } else {
+                contest.symmetry_rival(&v)
+            };
+            match rival {
                 Ok(rival) => rival.map(|r| (v, r)),
                 Err(_) => Some((v, Rival::Tie)),
             }
@@ -789,6 +835,16 @@ pub(super) fn ambiguity_message(
                  overlaps less (scores {second_score:.3} and {best_score:.3}); a symmetric room \
                  or box seen from inside: add structure both sensors see that breaks the \
                  symmetry",
+                angle.to_degrees()
+            );
+        }
+        Some(Rival::SquareTurn) => {
+            return format!(
+                "ambiguous: the corner's three planes are square, and the best pose turned a \
+                 third of a turn about the corner ({:.1} deg and {distance:.2} m away) fits the \
+                 clouds as well: it agrees as closely where they overlap and keeps the free \
+                 space as clear (scores {second_score:.3} and {best_score:.3}); add structure \
+                 both sensors see beyond the corner",
                 angle.to_degrees()
             );
         }

@@ -20,6 +20,10 @@ pub(super) const SAME_AXIS_COSINE: f64 = 0.985;
 /// when no two of their normals are further than this from perpendicular (the cosine of 70
 /// degrees).
 pub(super) const MAX_CORNER_COSINE: f64 = 0.34;
+/// ... and a truly square corner when none is further than this (the cosine of 85 degrees): a
+/// third turn maps its planes onto one another within the noise, so only what lies beyond the
+/// corner tells the turns apart (see `half_turn_rival`).
+pub(super) const SQUARE_CORNER_COSINE: f64 = 0.087;
 
 /// Adds the direction of `a` to `axes` unless it is too short (a cross product of two planes
 /// within ~12 degrees of parallel, [`MIN_AXIS_NORM`]) or within 10 degrees of one already there.
@@ -100,35 +104,24 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
 
 /// Turns of a third (120 degrees either way) about the four diagonals of a square corner, through
 /// the point where its three planes meet, when the largest reference planes of three directions
-/// (each more than 10 degrees from the others) make one ([`MAX_CORNER_COSINE`]); none otherwise.
+/// (each more than 10 degrees from the others) make one (no two normals further than `max_cosine`
+/// from perpendicular: [`MAX_CORNER_COSINE`] or [`SQUARE_CORNER_COSINE`]); none otherwise.
 /// Such a turn maps the corner's three planes onto one another: a cube corner matched plane for plane in the wrong cyclic order. Seen by
 /// one sensor on its side, a fresh corner of the adversarial suite (corner 9066, walls 90.7
 /// degrees apart) came back turned 120 degrees and 2.5 m off, passing the check with 18.6 % of
 /// its points in free space; the truth, a third turn of it, puts 3.0 % there.
-pub(super) fn third_turns(features: &[PlaneFeature]) -> Vec<Isometry3<f64>> {
+pub(super) fn third_turns(features: &[PlaneFeature], max_cosine: f64) -> Vec<Isometry3<f64>> {
     // The largest planes of three directions: a plane parallel to a larger one (a pavement
     // beside the road, the face of a box before a wall) is another surface of the same side of
     // the corner. Of a fresh corner seen by a sensor on its side (adversarial 11070, returned
     // turned 120 degrees) the third largest reference plane lay parallel to the second.
-    let mut chosen: Vec<&PlaneFeature> = Vec::with_capacity(3);
-    for f in features {
-        let n = f.plane.normal;
-        if chosen
-            .iter()
-            .all(|c| c.plane.normal.dot(&n).abs() < SAME_AXIS_COSINE)
-        {
-            chosen.push(f);
-        }
-        if chosen.len() == 3 {
-            break;
-        }
-    }
+    let chosen = largest_of_directions(features, 3);
     let [fa, fb, fc] = chosen[..] else {
         return Vec::new();
     };
     let planes = [fa.plane, fb.plane, fc.plane];
     let [a, b, c] = planes.map(|p| p.normal.into_inner());
-    if a.dot(&b).abs().max(a.dot(&c).abs()).max(b.dot(&c).abs()) > MAX_CORNER_COSINE {
+    if a.dot(&b).abs().max(a.dot(&c).abs()).max(b.dot(&c).abs()) > max_cosine {
         return Vec::new();
     }
     let Some(corner) = Plane::common_point(&planes) else {
@@ -147,6 +140,25 @@ pub(super) fn third_turns(features: &[PlaneFeature]) -> Vec<Isometry3<f64>> {
         }
     }
     turns
+}
+
+/// The largest planes of at most `count` directions (each more than 10 degrees from the others),
+/// largest first.
+pub(super) fn largest_of_directions(features: &[PlaneFeature], count: usize) -> Vec<&PlaneFeature> {
+    let mut chosen: Vec<&PlaneFeature> = Vec::with_capacity(count);
+    for f in features {
+        if chosen.len() == count {
+            break;
+        }
+        let n = f.plane.normal;
+        if chosen
+            .iter()
+            .all(|c| c.plane.normal.dot(&n).abs() < SAME_AXIS_COSINE)
+        {
+            chosen.push(f);
+        }
+    }
+    chosen
 }
 
 /// `start` moved, along each unit direction in turn, to the midpoint of the 2nd and 98th
@@ -234,8 +246,15 @@ mod tests {
         let wall = Vector3::new(88f64.to_radians().cos(), 88f64.to_radians().sin(), 0.0);
         let normals = [Vector3::x(), wall, Vector3::z()];
         let features = normals.map(|n| feature(n, -n.dot(&corner.coords)));
-        let turns = third_turns(&features);
+        let turns = third_turns(&features, MAX_CORNER_COSINE);
         assert_eq!(turns.len(), 8);
+        // 88 degrees is a square corner too (within 5 degrees); 80 degrees is not.
+        assert_eq!(third_turns(&features, SQUARE_CORNER_COSINE).len(), 8);
+        let eighty = Vector3::new(80f64.to_radians().cos(), 80f64.to_radians().sin(), 0.0);
+        let mut skewed = features.clone();
+        skewed[1] = feature(eighty, -eighty.dot(&corner.coords));
+        assert_eq!(third_turns(&skewed, MAX_CORNER_COSINE).len(), 8);
+        assert!(third_turns(&skewed, SQUARE_CORNER_COSINE).is_empty());
         for turn in &turns {
             assert!((turn.rotation.angle() - 2.0 * std::f64::consts::FRAC_PI_3).abs() < 1e-9);
             // The corner stays put.
@@ -250,14 +269,17 @@ mod tests {
         }
         // Walls 60 degrees apart make no square corner: no third turns.
         let skew = Vector3::new(0.5, 60f64.to_radians().sin(), 0.0);
-        assert!(third_turns(&[
-            feature(Vector3::x(), 0.0),
-            feature(skew, 0.0),
-            feature(Vector3::z(), 0.0)
-        ])
+        assert!(third_turns(
+            &[
+                feature(Vector3::x(), 0.0),
+                feature(skew, 0.0),
+                feature(Vector3::z(), 0.0)
+            ],
+            MAX_CORNER_COSINE
+        )
         .is_empty());
         // Fewer than three planes: none either.
-        assert!(third_turns(&features[..2]).is_empty());
+        assert!(third_turns(&features[..2], MAX_CORNER_COSINE).is_empty());
         // A plane parallel to a larger one (a pavement beside the road) is passed over for the
         // next direction: the same corner, the same turns.
         let pavement = feature(Vector3::z(), -Vector3::z().dot(&corner.coords) + 0.15);
@@ -267,12 +289,16 @@ mod tests {
             features[0].clone(),
             features[1].clone(),
         ];
-        let again = third_turns(&with_pavement);
+        let again = third_turns(&with_pavement, MAX_CORNER_COSINE);
         assert_eq!(again.len(), 8);
         for turn in &again {
             assert!((turn * corner - corner).norm() < 1e-9);
         }
         // Only two directions among the planes: none.
-        assert!(third_turns(&[features[0].clone(), pavement, features[2].clone()]).is_empty());
+        assert!(third_turns(
+            &[features[0].clone(), pavement, features[2].clone()],
+            MAX_CORNER_COSINE
+        )
+        .is_empty());
     }
 }
