@@ -519,9 +519,11 @@ pub(super) fn clearer_contender(
 }
 
 /// The scene's own symmetries (the [`half_turns`] of the reference's planes, and the
-/// [`third_turns`] of a square corner when the best pose passes the check but puts more than
-/// [`SLID_FREE_SPACE_MIN`] of the points into free space) applied to the best pose, each settled
-/// by ICP: the first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`]) or keeps the
+/// [`third_turns`] of a corner within 20 degrees of square when the best pose passes the check
+/// but puts more than [`SLID_FREE_SPACE_MIN`] of the points into free space, else of a corner
+/// within 5 degrees of square, judged by [`Contest::square_twin`]) applied to the best pose, each
+/// settled by ICP: the first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`],
+/// [`Rival::SquareTurn`]) or keeps the
 /// free space clearer ([`Rival::ClearerTurn`]). The hypotheses may never reach it: when the two
 /// sensors' fields of view differ the truth can rank below its own mirror image.
 pub(super) fn half_turn_rival(
