@@ -11,6 +11,7 @@ use rustc_hash::FxHashMap;
 use super::rivals::TWIN_AGREEMENT_MARGIN;
 use super::segment::PlaneFeature;
 use super::symmetry::largest_of_directions;
+use super::verify::stride_sample;
 use crate::check::{CheckReport, PreparedPair, Verdict};
 use crate::error::Result;
 use crate::geometry::Plane;
@@ -69,8 +70,7 @@ pub(super) fn periods(points: &[Point3<f64>], plane: &Plane) -> Vec<Vector3<f64>
     if structure.len() < MIN_STRUCTURE {
         return Vec::new();
     }
-    let stride = structure.len().div_ceil(STRUCTURE_SAMPLES).max(1);
-    let samples: Vec<Point3<f64>> = structure.iter().step_by(stride).copied().collect();
+    let samples = stride_sample(&structure, STRUCTURE_SAMPLES);
     let n = plane.normal.into_inner();
     let u = n.cross(&Vector3::x());
     let u = if u.norm() > 0.5 {

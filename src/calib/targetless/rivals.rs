@@ -543,24 +543,19 @@ pub(super) fn half_turn_rival(
         Ok(None) => (third_turns(features, SQUARE_CORNER_COSINE), true),
         Err(_) => (Vec::new(), false),
     };
-    let halves = half_turns(features, points);
-    let halves_len = halves.len();
-    halves
+    // Each turn with whether `square_twin` judges it.
+    half_turns(features, points)
         .into_iter()
-        .chain(thirds)
-        .enumerate()
-        .filter_map(|(i, turn)| {
-            verifier
-                .settle(&(turn * best))
-                .map(|v| (i >= halves_len, v))
-        })
+        .map(|turn| (false, turn))
+        .chain(thirds.into_iter().map(|turn| (square, turn)))
+        .filter_map(|(by_square, turn)| verifier.settle(&(turn * best)).map(|v| (by_square, v)))
         .filter(|(_, v)| !same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE))
-        .find_map(|(third, v)| {
+        .find_map(|(by_square, v)| {
             // A check that fails to run counts the turn as a rival, the cautious way.
             if contest.rival(&v).unwrap_or(true) {
                 return Some((v, Rival::Tie));
             }
-            let rival = if third && square {
+            let rival = if by_square {
                 contest.square_twin(&v)
             } else {
                 contest.symmetry_rival(&v)
