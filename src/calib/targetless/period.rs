@@ -41,11 +41,20 @@ const PERIOD_BIN: f64 = 0.25;
 const PEAKS: usize = 4;
 /// A shifted structure point lands on the structure when one lies within this (metres).
 const LANDING: f64 = 0.15;
-/// A shift is a period when the share of the structure that lands on the structure shifted by it
-/// (either way) exceeds the share that lands shifted by half of it by at least this: a wall lands
-/// on itself shifted by any length along it, a colonnade only by its period (and a wall behind a
-/// colonnade by both).
-const MIN_REPEATING: f64 = 0.15;
+/// A shift is a period when, of the structure that does not land on itself shifted by half of it
+/// (a wall lands on itself shifted by any length along it, a colonnade only by its period), at
+/// least this share lands shifted by all of it ...
+const MIN_REPEATING_SHARE: f64 = 0.5;
+/// ... and that is at least this share of all the structure.
+const MIN_REPEATING: f64 = 0.05;
+/// Cell side (metres) of the grid the landings are looked up in.
+const LANDING_CELL: f64 = 0.3;
+/// A proposed period is refined along it and across it in the plane, each way this many steps of
+/// [`REFINE_STEP`] (metres), then one step of half that either side of the best.
+const REFINE_STEPS: i64 = 3;
+const REFINE_STEP: f64 = 0.1;
+/// Structure samples (at most, a stride of the test's) that the refinement counts landings of.
+const REFINE_SAMPLES: usize = 100;
 
 /// The planes along which [`periods`] are sought: the largest of each of the three largest
 /// directions (a ground, a wall, a box's side), since the ground need not be the largest plane
@@ -58,9 +67,13 @@ pub(super) fn base_planes(features: &[PlaneFeature]) -> Vec<Plane> {
 }
 
 /// The periods of the reference's structure along a base plane `plane` (its ground, usually):
-/// shifts (reference frame, within [`PERIOD_RANGE`]) under which at least [`MIN_REPEATING`] more
-/// of the structure lands on itself than under half the shift. Proposed by the strongest peaks of
-/// the histogram of the differences between structure points at one level.
+/// shifts (reference frame, within [`PERIOD_RANGE`]) under which most of the structure that does
+/// not land on itself shifted by half the shift lands on itself ([`MIN_REPEATING_SHARE`], and at
+/// least [`MIN_REPEATING`] of all of it). Proposed by the strongest peaks of the histogram of the
+/// differences between structure points at one level, each refined to the nearby shift that lands
+/// the most. A share of the structure that does not land at half the shift, not of all of it: a
+/// long wall behind a row of boxes lands on itself at any shift along it, and when the wall is
+/// most of the structure (repeated 22082, 22145) the boxes that repeat are a small part of it.
 pub(super) fn periods(points: &[Point3<f64>], plane: &Plane) -> Vec<Vector3<f64>> {
     let structure: Vec<Point3<f64>> = points
         .iter()
@@ -140,23 +153,53 @@ pub(super) fn periods(points: &[Point3<f64>], plane: &Plane) -> Vec<Vector3<f64>
             peaks.push((cell, shift));
         }
     }
-    let grid = NeighbourGrid::new(&structure, 1.0);
-    let landed = |shift: &Vector3<f64>| {
-        let on = samples
-            .iter()
-            .filter(|p| {
+    let grid = NeighbourGrid::new(&structure, LANDING_CELL);
+    // Per point of `of`, whether it lands on the structure shifted by `shift` either way.
+    let lands = |of: &[Point3<f64>], shift: &Vector3<f64>| -> Vec<bool> {
+        of.iter()
+            .map(|p| {
                 grid.nearest(&(*p + shift), LANDING).is_some()
                     || grid.nearest(&(*p - shift), LANDING).is_some()
             })
-            .count();
-        on as f64 / samples.len() as f64
+            .collect()
+    };
+    let few = stride_sample(&samples, REFINE_SAMPLES);
+    let count = |shift: &Vector3<f64>| lands(&few, shift).into_iter().filter(|l| *l).count();
+    // The shift near `seed` (along it, then across it in the plane) that lands the most samples:
+    // a cell's mean difference may be a decimetre or two off the period (a wall behind a
+    // colonnade spreads differences evenly over the cell). Coarse steps, then half steps.
+    let refine = |seed: Vector3<f64>| -> Vector3<f64> {
+        let along = seed.normalize();
+        let across = n.cross(&along);
+        let mut best = seed;
+        let mut most = count(&best);
+        for direction in [along, across] {
+            for (steps, step) in [(REFINE_STEPS, REFINE_STEP), (1, 0.5 * REFINE_STEP)] {
+                let start = best;
+                for k in (-steps..=steps).filter(|k| *k != 0) {
+                    let shift = start + direction * (k as f64 * step);
+                    let c = count(&shift);
+                    if c > most {
+                        (most, best) = (c, shift);
+                    }
+                }
+            }
+        }
+        best
     };
     peaks
         .into_iter()
-        .map(|(_, shift)| shift)
+        .map(|(_, seed)| refine(seed))
         .filter(|shift| {
-            let whole = landed(shift);
-            whole - landed(&(shift * 0.5)) >= MIN_REPEATING
+            // The samples that do not land shifted by half the period (a wall or a box's side
+            // along the shift lands on itself shifted by any length): of those, the share that
+            // lands shifted by the whole period.
+            let (whole, half) = (lands(&samples, shift), lands(&samples, &(shift * 0.5)));
+            let free = half.iter().filter(|h| !**h).count();
+            let repeating = whole.iter().zip(&half).filter(|(w, h)| **w && !**h).count();
+            let n = samples.len() as f64;
+            repeating as f64 >= MIN_REPEATING * n
+                && repeating as f64 >= MIN_REPEATING_SHARE * free as f64
         })
         .collect()
 }
@@ -176,9 +219,9 @@ pub(super) fn period_twin(
 ) -> Result<Option<(Vector3<f64>, CheckReport)>> {
     for period in periods {
         for shift in [*period, -period] {
-            // Settled by the check's re-alignment first: the period is the mean of a histogram
-            // cell's differences, a decimetre or two off (colonnade 18042: 3.98 m for a truth
-            // 4.17 m from the result). One that slides back towards the result is no twin.
+            // Settled by the check's re-alignment first: the period is refined on a 5 cm
+            // lattice and the result itself may be a few centimetres off. One that slides back
+            // towards the result is no twin.
             let shifted = pair.aligned(&(Translation3::from(shift) * pose))?;
             let moved = (shifted.translation.vector - pose.translation.vector).norm();
             if moved < 0.5 * shift.norm() {
@@ -266,5 +309,28 @@ mod tests {
         assert!((found[0].norm() - 5.0).abs() < 0.1, "{found:?}");
         // Ground alone: nothing to repeat.
         assert!(periods(&ground(5.0, 5.0), &plane).is_empty());
+    }
+
+    #[test]
+    fn a_row_before_a_long_wall_repeats() {
+        // A wall 28 m long and 6 m high behind three columns 4.5 m apart: the columns are about a
+        // tenth of the structure, and the wall lands on itself at any shift along it.
+        let plane = Plane::new(Vector3::z(), 0.0).unwrap();
+        let mut scene = ground(15.0, 15.0);
+        for i in -140..=140 {
+            for k in 0..60 {
+                scene.push(Point3::new(i as f64 * 0.1, 6.0, 0.35 + 0.1 * k as f64));
+            }
+        }
+        for k in -1..=1 {
+            scene.extend(column(4.5 * k as f64, 2.0));
+        }
+        let found = periods(&scene, &plane);
+        assert!(!found.is_empty());
+        assert!((found[0].norm() - 4.5).abs() < 0.1, "{found:?}");
+        assert!(
+            found[0].normalize().dot(&Vector3::x()).abs() > 0.999,
+            "{found:?}"
+        );
     }
 }
