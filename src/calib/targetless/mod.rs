@@ -383,8 +383,12 @@ fn choose(
         checks,
         options,
     )?;
-    let samples = verifier.full_target_samples();
-    let contest = Contest::new(top, samples, checks, options.max_translation);
+    let contest = Contest::new(
+        top,
+        verifier.full_samples(),
+        checks,
+        options.max_translation,
+    );
     let contenders = pool.iter().map(|(_, v)| *v);
     let rivalry = find_rival(
         &contest,

@@ -75,6 +75,18 @@ pub(super) struct Verified {
     pub(super) score: f64,
 }
 
+/// The sampling variance of `v.score` verified on `samples` (target and reference points): the
+/// agreement and the target's violations are shares of the same target points (a point agrees or
+/// violates, not both), the reference's violations a share of the reference points.
+pub(super) fn score_variance(v: &Verified, samples: [usize; 2]) -> f64 {
+    let [n_target, n_reference] = samples.map(|n| n.max(1) as f64);
+    let a = v.agreement.clamp(0.0, 1.0);
+    let [t, r] = v.violations.map(|x| x.clamp(0.0, 1.0));
+    let w = VIOLATION_WEIGHT;
+    (a * (1.0 - a) + w * w * t * (1.0 - t) + 2.0 * w * a * t) / n_target
+        + w * w * r * (1.0 - r) / n_reference
+}
+
 /// Indices and scores of the verified hypotheses, best first (ties keep the enumeration order).
 pub(super) fn rank(verified: &[Option<Verified>]) -> Vec<(usize, f64)> {
     let mut ranked: Vec<(usize, f64)> = verified
@@ -212,9 +224,9 @@ impl<'a> Verifier<'a> {
         &self.reference_image
     }
 
-    /// Target points of the full verification.
-    pub(super) fn full_target_samples(&self) -> usize {
-        self.full[0].len()
+    /// Target and reference points of the full verification.
+    pub(super) fn full_samples(&self) -> [usize; 2] {
+        [self.full[0].len(), self.full[1].len()]
     }
 
     /// The verification score of `pose` on `samples` (see [`VIOLATION_WEIGHT`]).
