@@ -252,9 +252,11 @@ impl<'a> Contest<'a> {
         let Some(best_free) = self.best_free()? else {
             return Ok(None);
         };
-        // A tie that is no rival was ruled out, which for a turn this large means the check
-        // does not pass it: neither a twin nor clearer, and not worth a second check.
-        if self.ties(v)
+        // A tie by the ratio that is no rival was ruled out, which for a turn this large means
+        // the check does not pass it: neither a twin nor clearer, and not worth a second check.
+        // (One that ties only within the noise may pass the check and not fit as well: it may
+        // still keep the free space clearer.)
+        if self.ties_by_ratio(v)
             || !self.within(v)
             || pose_error(&v.pose, &self.best.pose).0 < RULED_OUT_TURN
         {
