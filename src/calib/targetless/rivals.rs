@@ -147,12 +147,9 @@ impl<'a> Contest<'a> {
     /// still counts. (Counting every unverifiable rival that fits as well, not only settled
     /// ones, refused six correct targetless results of the 1000 adversarial scenes.) A slide of
     /// the best pose itself (turned by less than RULED_OUT_TURN) is judged by
-    /// [`Contest::rules_out_slide`].
-    fn rules_out(&self, r: &Verified) -> Result<bool> {
-        if self.best_free()?.is_none() {
-            return Ok(false);
-        }
-        let c = self.checks.pair()?.check(&r.pose)?;
+    /// [`Contest::rules_out_slide`]. `c` is the check of `r`, run only when the best pose passes
+    /// it (without that, nothing is ruled out).
+    fn rules_out(&self, r: &Verified, c: CheckReport) -> Result<bool> {
         let turn = pose_error(&r.pose, &self.best.pose).0;
         if turn < RULED_OUT_TURN {
             return self.rules_out_slide(&c, turn);
@@ -365,16 +362,17 @@ impl<'a> Contest<'a> {
     /// solvable scenes of 2000 (rows of boxes and pole scenes whose second pose agreed less),
     /// while the truth of poles 22091, 1.04 m from its result, agrees as well.
     pub(super) fn rival(&self, r: &Verified) -> Result<bool> {
-        if !self.ties(r) || self.rules_out(r)? {
+        if !self.ties(r) {
             return Ok(false);
         }
-        // A best pose that fails the check gives nothing to compare with: any tie counts, as
-        // before (a colonnade whose best pose, 0.9 m off, failed it: repeated 47).
-        if self.ties_by_ratio(r) || self.best_check()?.is_none() {
+        // A best pose that fails the check gives nothing to compare with: nothing is ruled out
+        // and any tie counts (a colonnade whose best pose, 0.9 m off, failed it: repeated 47).
+        if self.best_check()?.is_none() {
             return Ok(true);
         }
         let c = self.checks.pair()?.check(&r.pose)?;
-        self.fits_as_well(&c)
+        let fits = self.fits_as_well(&c)?;
+        Ok(!self.rules_out(r, c)? && (self.ties_by_ratio(r) || fits))
     }
 }
 
@@ -993,11 +991,12 @@ mod tests {
 
     #[test]
     fn low_scores_tie_within_the_noise_of_their_violations() {
+        use super::super::verify::VIOLATION_WEIGHT;
         use crate::check::CheckOptions;
         let options = CheckOptions::default();
         let checks = LazyCheck::new(&[], &[], &options);
         let at = |x: f64, agreement: f64, violations: [f64; 2]| {
-            let score = agreement - 3.0 * (violations[0] + violations[1]);
+            let score = agreement - VIOLATION_WEIGHT * (violations[0] + violations[1]);
             Verified {
                 pose: Isometry3::translation(x, 0.0, 0.0),
                 agreement,
