@@ -284,7 +284,14 @@ pub fn calibrate_targetless(
     let check = checks.pair()?.certify(&pose)?;
     ensure_held(&check)?;
     let contenders = pool.iter().map(|(_, v)| *v);
-    let clearer = clearer_contender(&pose, &check, &top, contenders, &checks)?;
+    let clearer = clearer_contender(
+        &pose,
+        &check,
+        &top,
+        contenders,
+        &checks,
+        options.max_translation,
+    )?;
     if let Some(rivalry) = clearer.filter(|_| options.refuse_ambiguous) {
         let message = ambiguity_message(&top, &rivalry, options.max_translation);
         return Err(Error::calibration(FailureKind::Ambiguous, message));
