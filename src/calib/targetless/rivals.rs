@@ -575,6 +575,8 @@ pub(super) fn clearer_contender(
     let floor = CLEARER_CONTENDER_RATIO * best.score;
     let mut ranked: Vec<Verified> = contenders.filter(|v| v.score >= floor).collect();
     ranked.sort_by(|a, b| b.score.total_cmp(&a.score));
+    // An unverifiable contender is weighed only against a weakly held result.
+    let result_weak = report.weakest_translation.1 < UNVERIFIED_BEST_SHARE;
     let mut seen = vec![*result, best.pose];
     for v in ranked {
         // The result and the best verified pose, then at most MAX_POLISHED contenders.
@@ -594,13 +596,13 @@ pub(super) fn clearer_contender(
         let free = c.free_share();
         // (The 10-point rule this replaced, with the free space as clear, is a case of the
         // first: as clear means at most half as much, or no more and under 1 %.)
-        let better = (gain >= CLEARER_TIE_AGREEMENT_MARGIN && free <= best_free + CLEARER_FREE_TIE)
+        let nearly_as_clear = free <= best_free + CLEARER_FREE_TIE;
+        let better = (gain >= CLEARER_TIE_AGREEMENT_MARGIN && nearly_as_clear)
             || (gain >= CLEARER_FREE_AGREEMENT_MARGIN && clearer(free, best_free));
         // An unverifiable contender counts when it fits clearly better still: the check cannot
         // certify it, but it is evidence that the best pose owes its score to a wrong overlap.
-        let unverified_better = gain >= UNVERIFIED_AGREEMENT_MARGIN
-            && free <= best_free + CLEARER_FREE_TIE
-            && report.weakest_translation.1 < UNVERIFIED_BEST_SHARE;
+        let unverified_better =
+            result_weak && gain >= UNVERIFIED_AGREEMENT_MARGIN && nearly_as_clear;
         if (c.verdict == Verdict::Consistent && better)
             || (c.verdict == Verdict::Unverifiable
                 && unverified_better
@@ -990,15 +992,19 @@ pub(super) fn ambiguity_message(
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_twin_is_refused_as_a_symmetry_whatever_it_scores() {
-        use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-        let verified = |pose: Isometry3<f64>, score: f64| Verified {
+    /// A verified pose scoring `score`, all of it agreement.
+    fn verified(pose: Isometry3<f64>, score: f64) -> Verified {
+        Verified {
             pose,
             agreement: score,
             violations: [0.0; 2],
             score,
-        };
+        }
+    }
+
+    #[test]
+    fn a_twin_is_refused_as_a_symmetry_whatever_it_scores() {
+        use nalgebra::{Isometry3, Translation3, UnitQuaternion};
         let best = verified(Isometry3::identity(), 0.552);
         let turned = Isometry3::from_parts(
             Translation3::new(6.0, 0.5, 0.0),
@@ -1130,12 +1136,6 @@ mod tests {
         use nalgebra::{Translation3, UnitQuaternion};
         let options = CheckOptions::default();
         let checks = LazyCheck::new(&[], &[], &options);
-        let verified = |pose: Isometry3<f64>, score: f64| Verified {
-            pose,
-            agreement: score,
-            violations: [0.0; 2],
-            score,
-        };
         // Corridor 23152: the best pose turned 180 degrees from the truth, 0.23 m from it; both
         // weak along the vertical, the truth below the check's floor.
         let turned = Isometry3::from_parts(
