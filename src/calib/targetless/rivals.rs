@@ -546,6 +546,17 @@ const UNVERIFIED_AGREEMENT_MARGIN: f64 = 0.10;
 /// 198, 4.2 %: a supplementary second corner whose half turn agrees 98 % / 98 % against
 /// 86 % / 83 %); the corner method and `auto` solve it.
 const UNVERIFIED_BEST_SHARE: f64 = 0.05;
+/// A contender turned [`RULED_OUT_TURN`] or more from the result is weighed by [`turned_rival`]
+/// down to this share of the best verified pose's score, among the first
+/// [`MAX_TURNED_CONTENDERS`] distinct contenders: of the 1694 correct targetless results of six
+/// adversarial sets (6000 scenes), none had a turned contender there, consistent and nearly as
+/// clear, agreeing more than 4.5 points better both ways (down to 30 % of the score, none
+/// either); the wrong corner of [`turned_rival`] had one agreeing 21 points better ...
+const TURNED_CONTENDER_RATIO: f64 = 0.4;
+/// ... (see [`TURNED_CONTENDER_RATIO`]) ...
+const MAX_TURNED_CONTENDERS: usize = 10;
+/// ... and counts when it agrees this much better both ways.
+const TURNED_CLEARER_MARGIN: f64 = 0.10;
 /// See [`CLEARER_TIE_AGREEMENT_MARGIN`]: a point in a hundred, what a real scan's moving objects
 /// and noise change (the truth of 21050, at its verified pose, put 2.1 %).
 const CLEARER_FREE_TIE: f64 = 0.01;
@@ -562,7 +573,9 @@ const CLEARER_FREE_TIE: f64 = 0.01;
 /// 0.122, with 44 % / 53 % of its overlap in agreement and 6.2 % of the points in free space, the
 /// truth 82 % / 73 % and none; in a fresh corner seen by a sensor on its side (adversarial
 /// 14106) a pose 3.3 m along a wall scored 0.503 against the truth's 0.366, agreeing 82 % / 85 %
-/// against 98 % / 98 %, both with no point in free space.
+/// against 98 % / 98 %, both with no point in free space. Contenders turned [`RULED_OUT_TURN`]
+/// or more from the result are also judged by [`turned_rival`], down to
+/// [`TURNED_CONTENDER_RATIO`] of the best score and among the first [`MAX_TURNED_CONTENDERS`].
 pub(super) fn clearer_contender(
     result: &Isometry3<f64>,
     report: &CheckReport,
@@ -572,15 +585,17 @@ pub(super) fn clearer_contender(
     max_translation: f64,
 ) -> Result<Option<Rivalry>> {
     let best_free = report.free_share();
-    let floor = CLEARER_CONTENDER_RATIO * best.score;
+    let floor = CLEARER_CONTENDER_RATIO.min(TURNED_CONTENDER_RATIO) * best.score;
     let mut ranked: Vec<Verified> = contenders.filter(|v| v.score >= floor).collect();
     ranked.sort_by(|a, b| b.score.total_cmp(&a.score));
     // An unverifiable contender is weighed only against a weakly held result.
     let result_weak = report.weakest_translation.1 < UNVERIFIED_BEST_SHARE;
     let mut seen = vec![*result, best.pose];
     for v in ranked {
-        // The result and the best verified pose, then at most MAX_POLISHED contenders.
-        if seen.len() == MAX_POLISHED + 2 {
+        // The result and the best verified pose, then at most MAX_TURNED_CONTENDERS contenders
+        // (the first MAX_POLISHED of them, scoring CLEARER_CONTENDER_RATIO or more, judged by
+        // every rule; the others only as turned contenders).
+        if seen.len() == MAX_TURNED_CONTENDERS + 2 {
             break;
         }
         if seen
@@ -589,10 +604,15 @@ pub(super) fn clearer_contender(
         {
             continue;
         }
+        let every_rule =
+            seen.len() < MAX_POLISHED + 2 && v.score >= CLEARER_CONTENDER_RATIO * best.score;
         seen.push(v.pose);
+        let turned = pose_error(&v.pose, result).0 >= RULED_OUT_TURN;
+        if !(every_rule || turned) {
+            continue;
+        }
         let c = checks.pair()?.check(&v.pose)?;
-        let gain =
-            (c.agreement - report.agreement).min(c.reverse_agreement - report.reverse_agreement);
+        let gain = agreement_gain(report, &c);
         let free = c.free_share();
         // (The 10-point rule this replaced, with the free space as clear, is a case of the
         // first: as clear means at most half as much, or no more and under 1 %.)
@@ -603,10 +623,11 @@ pub(super) fn clearer_contender(
         // certify it, but it is evidence that the best pose owes its score to a wrong overlap.
         let unverified_better =
             result_weak && gain >= UNVERIFIED_AGREEMENT_MARGIN && nearly_as_clear;
-        if (c.verdict == Verdict::Consistent && better)
-            || (c.verdict == Verdict::Unverifiable
-                && unverified_better
-                && in_range(&v.pose, max_translation))
+        if every_rule
+            && ((c.verdict == Verdict::Consistent && better)
+                || (c.verdict == Verdict::Unverifiable
+                    && unverified_better
+                    && in_range(&v.pose, max_translation)))
         {
             let rival = Rival::ClearerContender {
                 best: [report.agreement, report.reverse_agreement, best_free],
@@ -614,8 +635,55 @@ pub(super) fn clearer_contender(
             };
             return Ok(Some(Rivalry::of(v, rival)));
         }
+        if turned {
+            if let Some(rival) = turned_rival(result, report, c, checks)? {
+                return Ok(Some(Rivalry::of(v, rival)));
+            }
+        }
     }
     Ok(None)
+}
+
+/// The rival kind of a contender turned [`RULED_OUT_TURN`] or more from the result (`result`,
+/// its check `report`), from the contender's check `c`: [`Rival::ClearerContender`] when it is
+/// consistent where it stands or where the check's re-alignment settles it (still turned that
+/// far from the result), keeps the free space nearly as clear ([`CLEARER_FREE_TIE`]) and agrees
+/// on its overlap both ways at least [`TURNED_CLEARER_MARGIN`] better than the result. A
+/// verified hypothesis is a coarse pose: the truth of a fresh corner (adversarial corner 24150),
+/// the tenth distinct contender at 46 % of the best score, failed the check where it stood and
+/// passed where its re-alignment took it, agreeing 97 % / 94 % against the result's 76 % / 71 %,
+/// with no point in free space either way; the result, turned 89 degrees and 2.7 m off, owed
+/// its score to an overlap twice as large.
+fn turned_rival(
+    result: &Isometry3<f64>,
+    report: &CheckReport,
+    c: CheckReport,
+    checks: &LazyCheck<'_>,
+) -> Result<Option<Rival>> {
+    let c = if c.verdict == Verdict::Consistent {
+        c
+    } else {
+        if pose_error(&c.aligned, result).0 < RULED_OUT_TURN {
+            return Ok(None);
+        }
+        checks.pair()?.check(&c.aligned)?
+    };
+    let best_free = report.free_share();
+    let free = c.free_share();
+    if c.verdict != Verdict::Consistent || free > best_free + CLEARER_FREE_TIE {
+        return Ok(None);
+    }
+    let better = agreement_gain(report, &c) >= TURNED_CLEARER_MARGIN;
+    Ok(better.then_some(Rival::ClearerContender {
+        best: [report.agreement, report.reverse_agreement, best_free],
+        other: [c.agreement, c.reverse_agreement, free],
+    }))
+}
+
+/// How much better the check `c` of another pose agrees on its overlap than the result's
+/// (`report`): the smaller gain of the two ways.
+fn agreement_gain(report: &CheckReport, c: &CheckReport) -> f64 {
+    (c.agreement - report.agreement).min(c.reverse_agreement - report.reverse_agreement)
 }
 
 /// The scene's own symmetries (the [`half_turns`] of the reference's planes, and the
@@ -991,6 +1059,7 @@ pub(super) fn ambiguity_message(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::check::CheckOptions;
 
     /// A verified pose scoring `score`, all of it agreement.
     fn verified(pose: Isometry3<f64>, score: f64) -> Verified {
@@ -1192,6 +1261,37 @@ mod tests {
         assert!(weak
             .rules_out(&verified(turned, 0.6), rival(vertical, [0.96, 0.95]))
             .unwrap());
+    }
+
+    #[test]
+    fn a_turned_contender_counts_when_consistent_and_clearly_better() {
+        // Adversarial corner 24150: the result agreed 76 % / 71 %, the truth (turned 89 degrees)
+        // 97 % / 94 %, neither putting points into free space.
+        let result = Isometry3::identity();
+        let mine = report(
+            Verdict::Consistent,
+            [0.0, 0.0, 1.0],
+            0.06,
+            [0.76, 0.71],
+            [0.0; 2],
+        );
+        let options = CheckOptions::default();
+        let checks = LazyCheck::new(&[], &[], &options);
+        let judge = |verdict, agreement, free| {
+            let c = report(verdict, [0.0, 0.0, 1.0], 0.26, agreement, free);
+            turned_rival(&result, &mine, c, &checks).unwrap()
+        };
+        assert!(matches!(
+            judge(Verdict::Consistent, [0.97, 0.94], [0.0; 2]),
+            Some(Rival::ClearerContender { .. })
+        ));
+        // Not better by 10 points both ways, or more than a point in a hundred in free space.
+        assert_eq!(judge(Verdict::Consistent, [0.97, 0.80], [0.0; 2]), None);
+        assert_eq!(judge(Verdict::Consistent, [0.97, 0.94], [0.0, 0.02]), None);
+        // Not consistent, and settled back onto the result (the report's re-aligned pose is the
+        // identity here): no rival, and no check of the settled pose is needed.
+        assert_eq!(judge(Verdict::Inconsistent, [0.97, 0.94], [0.0; 2]), None);
+        assert_eq!(judge(Verdict::Unverifiable, [0.97, 0.94], [0.0; 2]), None);
     }
 
     #[test]
