@@ -463,6 +463,20 @@ pub(super) struct Rivalry {
     pub(super) rival: Option<Rival>,
 }
 
+impl Rival {
+    /// [`Rival::ClearerContender`] from the result's check `report` and the contender's `c`.
+    fn clearer_contender(report: &CheckReport, c: &CheckReport) -> Self {
+        Rival::ClearerContender {
+            best: [
+                report.agreement,
+                report.reverse_agreement,
+                report.free_share(),
+            ],
+            other: [c.agreement, c.reverse_agreement, c.free_share()],
+        }
+    }
+}
+
 impl Rivalry {
     /// `v` as a rival of kind `rival`.
     fn of(v: Verified, rival: Rival) -> Self {
@@ -616,24 +630,19 @@ pub(super) fn clearer_contender(
         let free = c.free_share();
         // (The 10-point rule this replaced, with the free space as clear, is a case of the
         // first: as clear means at most half as much, or no more and under 1 %.)
-        let nearly_as_clear = free <= best_free + CLEARER_FREE_TIE;
-        let better = (gain >= CLEARER_TIE_AGREEMENT_MARGIN && nearly_as_clear)
+        let nearly_clear = nearly_as_clear(free, best_free);
+        let better = (gain >= CLEARER_TIE_AGREEMENT_MARGIN && nearly_clear)
             || (gain >= CLEARER_FREE_AGREEMENT_MARGIN && clearer(free, best_free));
         // An unverifiable contender counts when it fits clearly better still: the check cannot
         // certify it, but it is evidence that the best pose owes its score to a wrong overlap.
-        let unverified_better =
-            result_weak && gain >= UNVERIFIED_AGREEMENT_MARGIN && nearly_as_clear;
+        let unverified_better = result_weak && gain >= UNVERIFIED_AGREEMENT_MARGIN && nearly_clear;
         if every_rule
             && ((c.verdict == Verdict::Consistent && better)
                 || (c.verdict == Verdict::Unverifiable
                     && unverified_better
                     && in_range(&v.pose, max_translation)))
         {
-            let rival = Rival::ClearerContender {
-                best: [report.agreement, report.reverse_agreement, best_free],
-                other: [c.agreement, c.reverse_agreement, free],
-            };
-            return Ok(Some(Rivalry::of(v, rival)));
+            return Ok(Some(Rivalry::of(v, Rival::clearer_contender(report, &c))));
         }
         if turned {
             if let Some(rival) = turned_rival(result, report, c, checks)? {
@@ -668,16 +677,16 @@ fn turned_rival(
         }
         checks.pair()?.check(&c.aligned)?
     };
-    let best_free = report.free_share();
-    let free = c.free_share();
-    if c.verdict != Verdict::Consistent || free > best_free + CLEARER_FREE_TIE {
-        return Ok(None);
-    }
-    let better = agreement_gain(report, &c) >= TURNED_CLEARER_MARGIN;
-    Ok(better.then_some(Rival::ClearerContender {
-        best: [report.agreement, report.reverse_agreement, best_free],
-        other: [c.agreement, c.reverse_agreement, free],
-    }))
+    let better = c.verdict == Verdict::Consistent
+        && nearly_as_clear(c.free_share(), report.free_share())
+        && agreement_gain(report, &c) >= TURNED_CLEARER_MARGIN;
+    Ok(better.then(|| Rival::clearer_contender(report, &c)))
+}
+
+/// Whether a pose putting the share `free` of the points into free space keeps it nearly as
+/// clear as the result, which puts `best_free` there: at most [`CLEARER_FREE_TIE`] more.
+fn nearly_as_clear(free: f64, best_free: f64) -> bool {
+    free <= best_free + CLEARER_FREE_TIE
 }
 
 /// How much better the check `c` of another pose agrees on its overlap than the result's
@@ -1201,7 +1210,6 @@ mod tests {
 
     #[test]
     fn an_unverifiable_half_turn_weak_where_the_best_is_weak_stays_a_rival() {
-        use crate::check::CheckOptions;
         use nalgebra::{Translation3, UnitQuaternion};
         let options = CheckOptions::default();
         let checks = LazyCheck::new(&[], &[], &options);
