@@ -325,7 +325,7 @@ pub fn extract_planes(
         return Err(Error::calibration(
             FailureKind::TooFewFeatures,
             format!(
-            "only {} plane(s) with at least {min_inliers} inliers within {threshold} m were found, \
+            "only {} plane(s) with at least {min_inliers} inliers within {threshold:.3} m were found, \
              {} wanted{}",
             found.len(),
             options.count,

@@ -270,7 +270,7 @@ CASES: list[Case] = [
         "planes: threshold 100 m",
         planes(lambda: corner()[0], distance_threshold=100.0),
         CE,
-        "only 1 plane(s) with at least 50 inliers within 100 m",
+        "only 1 plane(s) with at least 50 inliers within 100.000 m",
     ),
     Case(
         "planes: loss scale 0",
