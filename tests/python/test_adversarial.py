@@ -282,6 +282,8 @@ def test_no_wrong_answer(family: str, seed: int) -> None:
 #: holds 13-19 % of its translation information along its weakest direction; corners 22035 and
 #: 23179 (targetless), whose unverifiable contenders that agree clearly better lie beyond
 #: max_translation: none of them is a rival.
+#: Corner 52 (planes, and auto through it): a corner whose plane orderings tie, refused until the
+#: check judged each tied ordering; one alone passes, overlapping 73 % of the scene.
 MUST_SOLVE = [
     ("poles", 117, "targetless"),
     ("corner", 5, "targetless"),
@@ -317,6 +319,8 @@ MUST_SOLVE = [
     ("corner", 12128, "targetless"),
     ("corner", 22035, "targetless"),
     ("corner", 23179, "targetless"),
+    ("corner", 52, "planes"),
+    ("corner", 52, "auto"),
 ]
 
 
@@ -423,7 +427,10 @@ def test_families_list_methods_they_can_use() -> None:
 #: along the vertical, which the best pose barely holds either, and fits as well. Corner 23000:
 #: an unverifiable contender within range fits clearly better than a weakly held result.
 #: Corner 24150: a contender turned 89 degrees passes the check where it settles and fits
-#: clearly better.
+#: clearly better. The corner method's tied orderings: in corridor 19099 the one ordering that
+#: passes the check is turned 90 degrees and overlaps 28 % of the scene, in corner 24019 turned
+#: 120 degrees and agreeing 31 % / 34 %; room 13001, whose passing ordering is a half turn, is
+#: enclosed, where the check does not break ties.
 REFUSED = [
     ("corner", 21188, "targetless", "ambiguous", "the corner's three planes are square"),
     ("repeated", 21027, "targetless", "ambiguous", "the reference repeats itself every"),
@@ -435,6 +442,9 @@ REFUSED = [
     ("repeated", 182, "targetless", "ambiguous", "may repeat itself"),
     ("repeated", 7127, "targetless", "no_agreement", "too little common structure"),
     ("repeated", 7116, "targetless", "no_agreement", "from the ground sweep"),
+    ("corridor", 19099, "planes", "ambiguous", "only one passes the check, but it overlaps 28 %"),
+    ("corner", 24019, "planes", "ambiguous", "only one passes the check, but it overlaps"),
+    ("corridor", 13001, "planes", "ambiguous", "two orderings fit the normals equally well"),
 ]
 
 

@@ -77,7 +77,7 @@ const SAME_POSE: (f64, f64) = (1.0 * std::f64::consts::PI / 180.0, 0.10);
 /// overlap less than half the scene often (378 of the 1496 returned over seeds 0-199 of the
 /// sets 0, 12000-20000), so only a turned alternative ([`TURNED_ANGLE`]) is sought then, and it
 /// is judged as in [`choose`] without the enclosed scene's free-space rule.
-const LOW_OVERLAP: f64 = 0.5;
+pub(super) const LOW_OVERLAP: f64 = 0.5;
 /// An alternative turned more than this from the first result (radians) is another corner of the
 /// scene; a parallel surface beside a plane of the corner (a pavement) moves the pose, not turns
 /// it, and is sought at a low overlap only where the re-alignment points ([`shifted`]).
@@ -109,7 +109,7 @@ const SHEET_SHARE: f64 = 0.10;
 /// free space is clear has its alternatives sought only then, as the search costs several times
 /// the first result. A surface at an angle to the plane crosses the bands and fills none; a
 /// plane parallel to it fills one.
-fn opposed_sheet(
+pub(super) fn opposed_sheet(
     points: &[Point3<f64>],
     planes: &[ExtractedPlane],
     threshold: f64,
