@@ -100,6 +100,20 @@ const SHEET_BEYOND: f64 = 0.3;
 /// result put 9.4 % of the points into free space behind clutter), 5.9 %.
 const SHEET_SHARE: f64 = 0.10;
 
+/// Whether either cloud holds a sheet facing one of its corner's planes across the sensor
+/// ([`opposed_sheet`]): a room or a street, where the two clouds may take different walls.
+pub(super) fn enclosed(pair: &Pair<'_>, found: [&[ExtractedPlane]; 2]) -> bool {
+    let clouds = [pair.reference, pair.target];
+    (0..2).any(|k| {
+        opposed_sheet(
+            clouds[k],
+            found[k],
+            pair.thresholds[k],
+            pair.options.min_inliers,
+        )
+    })
+}
+
 /// Whether the cloud `points` holds a sheet opposed to one of its corner's `planes` (normals
 /// toward the sensor): a band two inlier thresholds thick, parallel to a plane and beyond the
 /// sensor, holding at least [`SHEET_SHARE`] of the points and the fewest inliers of a plane, of
@@ -109,7 +123,7 @@ const SHEET_SHARE: f64 = 0.10;
 /// free space is clear has its alternatives sought only then, as the search costs several times
 /// the first result. A surface at an angle to the plane crosses the bands and fills none; a
 /// plane parallel to it fills one.
-pub(super) fn opposed_sheet(
+fn opposed_sheet(
     points: &[Point3<f64>],
     planes: &[ExtractedPlane],
     threshold: f64,
@@ -163,8 +177,7 @@ pub(super) fn next_plane(
         Ok(c) => c,
         other => return other,
     };
-    let enclosed =
-        (0..2).any(|k| opposed_sheet(clouds[k], found[k], thresholds[k], options.min_inliers));
+    let enclosed = enclosed(pair, found);
     // Without a suspicion of the free space or of an enclosed scene, the search is narrow: a
     // result explaining little of the scene looks only for a turned corner, and one the
     // re-alignment moved only for where it went; neither can refuse the result outright.

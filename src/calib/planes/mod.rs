@@ -393,10 +393,10 @@ pub fn calibrate_planes(
             Some(e) => Err(e),
         }
     });
-    let tied = matches!(&first, Err(e) if e.kind() == Some(FailureKind::Ambiguous))
-        && options.up.is_none();
     let first = match first {
-        Err(e) if tied => resolve_tie(&pair, found, &mut clock, e),
+        Err(e) if e.kind() == Some(FailureKind::Ambiguous) && options.up.is_none() => {
+            resolve_tie(&pair, found, &mut clock, e)
+        }
         other => other,
     };
     let mut result = alternates::next_plane(first, &pair, found, &mut clock)?;
@@ -417,7 +417,7 @@ const TIE_AGREEMENT: f64 = 0.5;
 /// [`LOW_OVERLAP`](alternates::LOW_OVERLAP) of the scene. What tells the orderings apart is the
 /// scene beyond the three planes (their extents, what stands before them). Otherwise `refusal`,
 /// the tie's own error, saying what the check found. Not in an enclosed scene (a plane facing one
-/// of the three across the sensor, [`opposed_sheet`](alternates::opposed_sheet)): in a room the two
+/// of the three across the sensor, [`enclosed`](alternates::enclosed)): in a room the two
 /// clouds may take different walls, so that no ordering is the truth and the one that passes is
 /// turned half a turn (over seeds 0-999 and 12000-25999 of the adversarial suite, 17 rooms came
 /// back wrong that way). Of those 15,000 scenes it solves 35 more (34 solvable), none wrong, and
@@ -431,16 +431,7 @@ fn resolve_tie(
     clock: &mut Stopwatch,
     refusal: Error,
 ) -> Result<PlanarCalibration> {
-    let clouds = [pair.reference, pair.target];
-    let enclosed = (0..2).any(|k| {
-        alternates::opposed_sheet(
-            clouds[k],
-            found[k],
-            pair.thresholds[k],
-            pair.options.min_inliers,
-        )
-    });
-    if enclosed {
+    if alternates::enclosed(pair, found) {
         return Err(refusal);
     }
     let (mut passed, mut unverifiable) = (Vec::new(), 0);
