@@ -3,10 +3,12 @@
 Run from the repository root after installing the wheel:
     python benches/adversarial.py [--scenes N] [--workers 2] [--families corner poles ...]
         [--methods auto targetless ...] [--json OUT] [--start-seed S] [--save-wrong DIR]
+        [--condition narrow-fov]
 
 Scenes come from :mod:`lidarcal.scenarios`, spread evenly over the families (scene ``i`` of a
-family is ``scenarios.make(family, start_seed + i)``). Every method the scene lists is called
-through ``lidarcal.calibrate`` and each outcome is classed as
+family is ``scenarios.make(family, start_seed + i)``), under ``--condition`` if given
+(``scenarios.degrade``: a narrow field of view, a sparse target, spurious returns). Every
+method the scene lists is called through ``lidarcal.calibrate`` and each outcome is classed as
 
 * solved -- returned, rotation error <= 0.05 rad and translation error <= 0.10 m;
 * wrong -- returned with a larger error: the number to drive to zero;
@@ -103,22 +105,24 @@ def result_attributes(result: Any) -> dict[str, Any]:
     return {name: value for name, value in plain.items() if value is not None}
 
 
-def run_scene(
-    task: tuple[str, int, tuple[str, ...] | None],
-) -> tuple[str, int, list[dict[str, Any]]]:
+Task = tuple[str, int, tuple[str, ...] | None, str]
+
+
+def run_scene(task: Task) -> tuple[str, int, list[dict[str, Any]]]:
     """Generates one scene and runs each of its methods (those in the filter, if any)."""
     import lidarcal
     from lidarcal import scenarios
 
-    family, seed, method_filter = task
+    family, seed, method_filter, condition = task
     t0 = time.perf_counter()
     try:
-        scene = scenarios.make(family, seed)
+        scene = scenarios.degrade(scenarios.make(family, seed), condition)
     except Exception as e:  # a generator failure is a bench bug: report it, keep going
         failure = {
             "family": family,
             "seed": seed,
             "method": "(generator)",
+            "condition": condition,
             "outcome": "error",
             "exception": type(e).__name__,
             "message": str(e),
@@ -136,6 +140,7 @@ def run_scene(
             "family": family,
             "seed": seed,
             "method": method,
+            "condition": condition,
             "solvable": scene.solvable,
             "generate_s": generate_s,
             "points": [int(scene.reference.shape[0]), int(scene.target.shape[0])],
@@ -175,8 +180,12 @@ def run_scene(
 
 
 def tasks(
-    families: Sequence[str], scenes: int, start_seed: int, methods: tuple[str, ...] | None
-) -> list[tuple[str, int, tuple[str, ...] | None]]:
+    families: Sequence[str],
+    scenes: int,
+    start_seed: int,
+    methods: tuple[str, ...] | None,
+    condition: str = "none",
+) -> list[Task]:
     """``scenes`` scenes spread evenly over ``families`` (the first ones get the remainder),
     interleaved so that progress covers every family."""
     per = [
@@ -187,7 +196,7 @@ def tasks(
     for i in range(max(per, default=0)):
         for family, n in zip(families, per, strict=True):
             if i < n:
-                out.append((family, start_seed + i, methods))
+                out.append((family, start_seed + i, methods, condition))
     return out
 
 
@@ -198,7 +207,12 @@ def _row(label: str, counts: dict[str, int], scenes: int | str) -> str:
     )
 
 
-def report(records: list[dict[str, Any]], families: Sequence[str], wall_s: float) -> None:
+def report(
+    records: list[dict[str, Any]], families: Sequence[str], wall_s: float, condition: str = "none"
+) -> None:
+    if condition != "none":
+        print(f"Condition: {condition} (scenarios.degrade)")
+        print()
     methods = [m for m in ALL_METHODS if any(r["method"] == m for r in records)]
     by: dict[tuple[str, str], dict[str, int]] = defaultdict(lambda: dict.fromkeys(OUTCOMES, 0))
     scene_count: dict[tuple[str, str], set[tuple[str, int]]] = defaultdict(set)
@@ -244,7 +258,7 @@ def report(records: list[dict[str, Any]], families: Sequence[str], wall_s: float
         print()
         print(
             'WRONG answers (reproduce: python -c "from lidarcal import scenarios; '
-            "s = scenarios.make('FAMILY', SEED)\"):"
+            f"s = scenarios.degrade(scenarios.make('FAMILY', SEED), '{condition}')\"):"
         )
         print(
             "| family | seed | method | returned by | rot (deg) | trans (cm) | solvable | result |"
@@ -291,7 +305,7 @@ def save_wrong(records: Iterable[dict[str, Any]], directory: Path) -> None:
         if r["outcome"] != "wrong" or (r["family"], r["seed"]) in done:
             continue
         done.add((r["family"], r["seed"]))
-        s = scenarios.make(r["family"], r["seed"])
+        s = scenarios.degrade(scenarios.make(r["family"], r["seed"]), r.get("condition", "none"))
         methods = sorted(
             x["method"]
             for x in records
@@ -333,6 +347,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="write each scene with a wrong answer as DIR/<family>_<seed>.npz",
     )
     parser.add_argument(
+        "--condition",
+        default="none",
+        choices=scenarios.CONDITIONS,
+        help="put every scene under this condition (scenarios.degrade; default none)",
+    )
+    parser.add_argument(
         "--timeout",
         type=float,
         default=600.0,
@@ -341,11 +361,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     methods = tuple(args.methods) if args.methods else None
-    work = tasks(args.families, args.scenes, args.start_seed, methods)
+    work = tasks(args.families, args.scenes, args.start_seed, methods, args.condition)
     records: list[dict[str, Any]] = []
     t0 = time.perf_counter()
     done = 0
-    pending = {(f, s) for f, s, _ in work}
+    pending = {(f, s) for f, s, _, _ in work}
     hung = False
 
     def progress() -> None:
@@ -389,7 +409,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     progress()
     wall_s = time.perf_counter() - t0
     records.sort(key=lambda r: (r["family"], r["seed"], r["method"]))
-    report(records, args.families, wall_s)
+    report(records, args.families, wall_s, args.condition)
     if hung:
         print(f"HANG: gave up with {len(pending)} scenes pending: {sorted(pending)[:20]}")
     if args.json is not None:

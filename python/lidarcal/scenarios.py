@@ -29,10 +29,17 @@ Families (:data:`FAMILIES`):
 
 The world frame of every scene is the scene's own; the truth is
 ``inv(world_from_reference) @ world_from_target``.
+
+:func:`degrade` puts a scene under a condition the families never draw (:data:`CONDITIONS`):
+a narrow field of view, a sparse target, spurious returns. The truth stays; what is known
+about solvability is kept only where the condition cannot change it::
+
+    s = scenarios.degrade(scenarios.make("corner", 3), "narrow-fov")
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import zlib
@@ -44,7 +51,7 @@ import numpy.typing as npt
 
 from lidarcal import sim
 
-__all__ = ["FAMILIES", "TAPE_INTENSITY", "Scenario", "make"]
+__all__ = ["CONDITIONS", "FAMILIES", "TAPE_INTENSITY", "Scenario", "degrade", "make"]
 
 F64Array = npt.NDArray[np.float64]
 #: Decides solvability from both scans (world frame) and their intensities: (verdict, evidence).
@@ -52,6 +59,15 @@ Judge = Callable[[F64Array, F64Array, F64Array, F64Array], tuple[bool | None, st
 
 #: The scene families :func:`make` knows.
 FAMILIES: tuple[str, ...] = ("corner", "poles", "partial", "corridor", "repeated")
+
+#: The conditions :func:`degrade` knows ("none" leaves a scene as it is).
+CONDITIONS: tuple[str, ...] = (
+    "none",
+    "narrow-fov",
+    "half-fov-target",
+    "sparse-target",
+    "outliers",
+)
 
 #: Returns at or above this intensity count as retro-reflective tape (Velodyne's 230).
 TAPE_INTENSITY = 230.0
@@ -1016,4 +1032,72 @@ def make(family: str, seed: int) -> Scenario:
         solvable=solvable,
         description=description,
         methods=build.methods,
+    )
+
+
+def _field_of_view(cloud: F64Array, width_deg: float, rng: np.random.Generator) -> F64Array:
+    """The returns of ``cloud`` (sensor frame) within a horizontal field of view ``width_deg``
+    wide, facing where most returns are give or take 30 degrees (a solid-state unit, or a
+    spinning one whose rear view the vehicle blocks)."""
+    xy = cloud[:, :2]
+    norms = np.maximum(np.linalg.norm(xy, axis=1), 1e-9)
+    mean = (xy / norms[:, None]).mean(axis=0)
+    centre = math.atan2(mean[1], mean[0]) + math.radians(_u(rng, -30.0, 30.0))
+    off = (np.arctan2(xy[:, 1], xy[:, 0]) - centre + math.pi) % math.tau - math.pi
+    out: F64Array = cloud[np.abs(off) < math.radians(width_deg) / 2.0]
+    return out
+
+
+def _spurious(cloud: F64Array, share: float, rng: np.random.Generator) -> F64Array:
+    """``cloud`` with ``share`` more returns (dust, rain, a dirty window): any direction, 1-15 m
+    out, intensities of paint or clutter (under the tape's), shuffled in among the others."""
+    k = int(share * len(cloud))
+    direction = rng.normal(size=(k, 3))
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    extra = np.hstack(
+        [direction * rng.uniform(1.0, 15.0, size=(k, 1)), rng.uniform(*CLUTTER, size=(k, 1))]
+    )
+    out: F64Array = np.vstack([cloud, extra])[rng.permutation(len(cloud) + k)]
+    return out
+
+
+def degrade(scene: Scenario, condition: str) -> Scenario:
+    """``scene`` under ``condition`` (one of :data:`CONDITIONS`), the same for the same scene:
+
+    * ``narrow-fov`` -- each sensor keeps a 120 degree horizontal field of view facing where most
+      of its returns are, give or take 30 degrees;
+    * ``half-fov-target`` -- the target alone keeps 180 degrees so;
+    * ``sparse-target`` -- the target keeps a random quarter of its returns;
+    * ``outliers`` -- 3 % more returns in each cloud, anywhere 1-15 m out.
+
+    ``solvable`` stays False (less data resolves no symmetry) and True under ``outliers``; it
+    becomes None (not sure) otherwise. Raises ``ValueError`` for an unknown condition.
+    """
+    if condition not in CONDITIONS:
+        raise ValueError(
+            f"unknown condition {condition!r}; expected one of {', '.join(CONDITIONS)}"
+        )
+    if condition == "none":
+        return scene
+    rng = np.random.default_rng(
+        [zlib.crc32(scene.family.encode()), scene.seed, zlib.crc32(condition.encode())]
+    )
+    reference, target = scene.reference, scene.target
+    if condition == "narrow-fov":
+        reference = _field_of_view(reference, 120.0, rng)
+        target = _field_of_view(target, 120.0, rng)
+    elif condition == "half-fov-target":
+        target = _field_of_view(target, 180.0, rng)
+    elif condition == "sparse-target":
+        target = target[rng.uniform(size=len(target)) < 0.25]
+    else:
+        reference = _spurious(reference, 0.03, rng)
+        target = _spurious(target, 0.03, rng)
+    keeps = scene.solvable is False or condition == "outliers"
+    return dataclasses.replace(
+        scene,
+        reference=reference,
+        target=target,
+        solvable=scene.solvable if keeps else None,
+        description=f"{scene.description}; condition {condition}",
     )

@@ -409,6 +409,71 @@ def test_scenario_shapes_and_truth(family: str) -> None:
     assert overlap(t) > 0.05 and overlap(t) > overlap(off)
 
 
+def test_degrade_is_deterministic_and_keeps_the_truth() -> None:
+    scene = scenarios.make("corner", 3)
+    assert scenarios.degrade(scene, "none") is scene
+    for condition in scenarios.CONDITIONS[1:]:
+        a, b = scenarios.degrade(scene, condition), scenarios.degrade(scene, condition)
+        assert np.array_equal(a.reference, b.reference) and np.array_equal(a.target, b.target)
+        assert np.array_equal(a.reference_from_target, scene.reference_from_target)
+        assert a.description == f"{scene.description}; condition {condition}"
+        assert a.methods == scene.methods and (a.family, a.seed) == (scene.family, scene.seed)
+        for cloud in (a.reference, a.target):
+            assert cloud.ndim == 2 and cloud.shape[1] == 4 and np.all(np.isfinite(cloud))
+    assert not np.array_equal(
+        scenarios.degrade(scene, "sparse-target").target,
+        scenarios.degrade(scenarios.make("corner", 4), "sparse-target").target,
+    )
+
+
+def _azimuth_span_deg(cloud: np.ndarray) -> float:
+    """The widest horizontal angle between returns (360 less the largest empty sector)."""
+    az = np.sort(np.degrees(np.arctan2(cloud[:, 1], cloud[:, 0])))
+    gaps = np.diff(np.concatenate([az, [az[0] + 360.0]]))
+    return float(360.0 - gaps.max())
+
+
+def test_degrade_conditions_do_what_they_say() -> None:
+    scene = scenarios.make("corner", 3)
+    assert scene.solvable is True
+    assert _azimuth_span_deg(scene.target[:, :3]) > 300.0
+    narrow = scenarios.degrade(scene, "narrow-fov")
+    for cut, full in ((narrow.reference, scene.reference), (narrow.target, scene.target)):
+        assert _azimuth_span_deg(cut[:, :3]) <= 120.0
+        assert 0 < len(cut) < len(full)
+        # Returns are kept, not made: each is a row of the full scan.
+        assert set(map(tuple, cut)) <= set(map(tuple, full))
+    half = scenarios.degrade(scene, "half-fov-target")
+    assert np.array_equal(half.reference, scene.reference)
+    assert _azimuth_span_deg(half.target[:, :3]) <= 180.0
+    sparse = scenarios.degrade(scene, "sparse-target")
+    assert np.array_equal(sparse.reference, scene.reference)
+    assert 0.2 < len(sparse.target) / len(scene.target) < 0.3
+    noisy = scenarios.degrade(scene, "outliers")
+    for more, full in ((noisy.reference, scene.reference), (noisy.target, scene.target)):
+        known = set(map(tuple, full))
+        extra = np.array([row for row in more if tuple(row) not in known])
+        assert len(more) == len(full) + len(extra) and len(extra) == int(0.03 * len(full))
+        ranges = np.linalg.norm(extra[:, :3], axis=1)
+        assert np.all((ranges >= 1.0) & (ranges <= 15.0))
+        assert np.all(extra[:, 3] < scenarios.TAPE_INTENSITY)  # never taken for tape
+    # Only spurious returns keep a solvable scene solvable for sure; nothing makes an
+    # unsolvable one solvable.
+    assert (narrow.solvable, half.solvable, sparse.solvable, noisy.solvable) == (
+        None,
+        None,
+        None,
+        True,
+    )
+    unsolvable = next(
+        s for s in (scenarios.make("corridor", i) for i in range(20)) if s.solvable is False
+    )
+    for condition in scenarios.CONDITIONS:
+        assert scenarios.degrade(unsolvable, condition).solvable is False
+    with pytest.raises(ValueError, match="unknown condition"):
+        scenarios.degrade(scene, "fog")
+
+
 def test_families_list_methods_they_can_use() -> None:
     assert scenarios.FAMILIES == ("corner", "poles", "partial", "corridor", "repeated")
     assert "planes" in scenarios.make("corner", 0).methods
