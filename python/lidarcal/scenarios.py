@@ -1070,7 +1070,7 @@ def degrade(scene: Scenario, condition: str) -> Scenario:
     * ``sparse-target`` -- the target keeps a random quarter of its returns;
     * ``outliers`` -- 3 % more returns in each cloud, anywhere 1-15 m out.
 
-    ``solvable`` stays False (less data resolves no symmetry) and True under ``outliers``; it
+    ``solvable`` is kept under ``outliers``, and when False (less data resolves no symmetry); it
     becomes None (not sure) otherwise. Raises ``ValueError`` for an unknown condition.
     """
     if condition not in CONDITIONS:
