@@ -32,9 +32,12 @@ import traceback
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from lidarcal.calibrate import Method
 
 ROT_TOL = 0.05  # rad
 TRANS_TOL = 0.10  # m
@@ -147,7 +150,9 @@ def run_scene(task: Task) -> tuple[str, int, list[dict[str, Any]]]:
         }
         t1 = time.perf_counter()
         try:
-            result = lidarcal.calibrate(scene.reference, scene.target, method=method)
+            result = lidarcal.calibrate(
+                scene.reference, scene.target, method=cast("Method", method)
+            )
         except lidarcal.CalibrationError as e:
             rec["time_s"] = time.perf_counter() - t1
             rec["outcome"] = "refused_solvable" if scene.solvable else "refused_right"
