@@ -631,8 +631,7 @@ pub(super) fn clearer_contender(
         // (The 10-point rule this replaced, with the free space as clear, is a case of the
         // first: as clear means at most half as much, or no more and under 1 %.)
         let nearly_clear = nearly_as_clear(free, best_free);
-        let better = (gain >= CLEARER_TIE_AGREEMENT_MARGIN && nearly_clear)
-            || (gain >= CLEARER_FREE_AGREEMENT_MARGIN && clearer(free, best_free));
+        let better = fits_clearly_better(report, &c, CLEARER_TIE_AGREEMENT_MARGIN);
         // An unverifiable contender counts when it fits clearly better still: the check cannot
         // certify it, but it is evidence that the best pose owes its score to a wrong overlap.
         let unverified_better = result_weak && gain >= UNVERIFIED_AGREEMENT_MARGIN && nearly_clear;
@@ -684,15 +683,23 @@ fn turned_rival(
         }
         checks.pair()?.check(&c.aligned)?
     };
+    let better =
+        c.verdict == Verdict::Consistent && fits_clearly_better(report, &c, TURNED_CLEARER_MARGIN);
+    Ok(better.then(|| Rival::clearer_contender(report, &c)))
+}
+
+/// Whether the check `c` of another pose fits clearly better than the result's (`report`): it
+/// agrees on its overlap both ways at least `tie_margin` better keeping the free space nearly as
+/// clear ([`nearly_as_clear`]), or [`CLEARER_FREE_AGREEMENT_MARGIN`] better keeping it
+/// [`clearer`]. The first contenders and the turned ones differ only in `tie_margin`.
+fn fits_clearly_better(report: &CheckReport, c: &CheckReport, tie_margin: f64) -> bool {
     let (gain, free, best_free) = (
-        agreement_gain(report, &c),
+        agreement_gain(report, c),
         c.free_share(),
         report.free_share(),
     );
-    let better = c.verdict == Verdict::Consistent
-        && ((gain >= TURNED_CLEARER_MARGIN && nearly_as_clear(free, best_free))
-            || (gain >= CLEARER_FREE_AGREEMENT_MARGIN && clearer(free, best_free)));
-    Ok(better.then(|| Rival::clearer_contender(report, &c)))
+    (gain >= tie_margin && nearly_as_clear(free, best_free))
+        || (gain >= CLEARER_FREE_AGREEMENT_MARGIN && clearer(free, best_free))
 }
 
 /// Whether a pose putting the share `free` of the points into free space keeps it nearly as
