@@ -74,10 +74,13 @@ from lidarcal import _lidarcal  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "python"))
 import reference as ref  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from open3d_import import import_open3d  # noqa: E402
+
 try:
-    import open3d as o3d
-except ImportError:  # pragma: no cover - the comparison needs it
-    sys.exit("benches/compare.py needs Open3D: pip install open3d")
+    o3d = import_open3d()
+except ImportError as e:  # pragma: no cover - the comparison needs it
+    sys.exit(f"benches/compare.py needs Open3D: {e}")
 
 
 def median_time(fn: Callable[[], Any], repeats: int) -> tuple[float, Any]:

@@ -19,7 +19,7 @@ printed with their ratio to lidarcal's.
 
 Usage:
 
-    pip install pypcd4 open3d
+    pip install pypcd4 open3d libusb-package
     python benches/io_compare.py [--points 1000000] [--repeats 5]
 """
 
@@ -47,12 +47,16 @@ elif reader == "pypcd4":
     def read():
         return PointCloud.from_path(path).numpy(("x", "y", "z", "intensity"))
 elif reader == "open3d-t":
-    import open3d as o3d
+    sys.path.insert(0, sys.argv[4])
+    from open3d_import import import_open3d
+    o3d = import_open3d()
     def read():
         pc = o3d.t.io.read_point_cloud(path)
         return np.column_stack([pc.point.positions.numpy(), pc.point.intensity.numpy()])
 else:
-    import open3d as o3d
+    sys.path.insert(0, sys.argv[4])
+    from open3d_import import import_open3d
+    o3d = import_open3d()
     def read():
         return np.asarray(o3d.io.read_point_cloud(path).points)
 def rss_kib(key):
@@ -122,7 +126,7 @@ def write_pcd(path: Path, n: int, compressed: bool, seed: int = 0) -> None:
 
 def run(reader: str, path: Path, repeats: int) -> dict[str, float] | None:
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, reader, str(path), str(repeats)],
+        [sys.executable, "-c", CHILD, reader, str(path), str(repeats), str(Path(__file__).parent)],
         capture_output=True,
         text=True,
         check=False,
