@@ -272,6 +272,43 @@ impl NeighbourGrid {
         }
     }
 
+    /// Whether a point within `distance` of `q` passes `keep` (given its input index). Any
+    /// distance is answered exactly; the cells the ball's bounding box touches are searched, so
+    /// the cost grows with `distance` over the cell side.
+    pub(crate) fn any_within_where(
+        &self,
+        q: &Point3<f64>,
+        distance: f64,
+        keep: impl Fn(usize) -> bool,
+    ) -> bool {
+        let limit = distance * distance;
+        let span =
+            |x: f64| cell_of(x - distance, self.inverse)..=cell_of(x + distance, self.inverse);
+        for cx in span(q.x) {
+            for cy in span(q.y) {
+                for cz in span(q.z) {
+                    let Some(&(start, end)) = self.cells.get(&key([cx, cy, cz])) else {
+                        continue;
+                    };
+                    let (start, end) = (start as usize, end as usize);
+                    let (Some(points), Some(ids)) =
+                        (self.sorted.get(start..end), self.ids.get(start..end))
+                    else {
+                        continue;
+                    };
+                    let hit = points.iter().zip(ids).any(|(p, &id)| {
+                        let d2 = (p[0] - q.x).powi(2) + (p[1] - q.y).powi(2) + (p[2] - q.z).powi(2);
+                        d2 <= limit && keep(id as usize)
+                    });
+                    if hit {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
     /// Updates `best` with the points of cell `k` within `bound` (squared).
     fn scan(&self, k: u64, q: &[f64; 3], best: &mut Option<(u32, f64)>, bound: &mut f64) {
         let Some(&(start, end)) = self.cells.get(&k) else {
@@ -371,6 +408,22 @@ mod tests {
                 assert_eq!(grid.nearest_k(&q, k, d), expected, "q {q:?} k {k} d {d}");
             }
         }
+        // Whether any point within d passes a filter (odd indices), against brute force.
+        for _ in 0..1000 {
+            let q = Point3::new(
+                rng.random_range(-6.0..6.0),
+                rng.random_range(-6.0..6.0),
+                rng.random_range(-1.0..1.0),
+            );
+            for d in [0.05, 0.15, 0.5, 1.2] {
+                let expected = points
+                    .iter()
+                    .enumerate()
+                    .any(|(i, p)| i % 2 == 1 && (p - q).norm_squared() <= d * d);
+                assert_eq!(grid.any_within_where(&q, d, |i| i % 2 == 1), expected);
+            }
+        }
+        assert!(!grid.any_within_where(&Point3::new(f64::NAN, 0.0, 0.0), 1.0, |_| true));
         assert!(!grid.reaches(0.51));
         let far = Point3::new(-1e6, 2e6, 5.1);
         assert_eq!(grid.nearest(&far, 0.2).map(|x| x.0), Some(points.len() - 1));

@@ -162,6 +162,7 @@ use super::Stopwatch;
 use crate::check::CheckReport;
 use crate::error::{Error, FailureKind, Result};
 use crate::geometry::Plane;
+use crate::grid::NeighbourGrid;
 use crate::icp::IcpResult;
 use crate::lm::LmReport;
 
@@ -338,10 +339,13 @@ fn period_twin(
     reference: &Prepared,
     checks: &LazyCheck<'_>,
 ) -> Result<Option<String>> {
-    let periods = period::base_planes(&reference.features)
-        .iter()
-        .flat_map(|plane| period::periods(&reference.points, plane))
-        .collect::<Vec<_>>();
+    // One grid for the base planes, whose searches run side by side.
+    let grid = NeighbourGrid::new(&reference.points, period::LANDING_CELL);
+    let planes = period::base_planes(&reference.features);
+    let periods = crate::par_map(&planes, |plane| {
+        period::periods(&reference.points, &grid, plane)
+    })
+    .concat();
     let Some((shift, twin)) = period::period_twin(pose, check, &periods, checks.pair()?)? else {
         return Ok(None);
     };

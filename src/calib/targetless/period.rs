@@ -48,7 +48,7 @@ const MIN_REPEATING_SHARE: f64 = 0.5;
 /// ... and that is at least this share of all the structure.
 const MIN_REPEATING: f64 = 0.05;
 /// Cell side (metres) of the grid the landings are looked up in.
-const LANDING_CELL: f64 = 0.3;
+pub(super) const LANDING_CELL: f64 = 0.3;
 /// A proposed period is refined along it and across it in the plane, each way this many steps of
 /// [`REFINE_STEP`] (metres), then one step of half that either side of the best.
 const REFINE_STEPS: i64 = 3;
@@ -74,11 +74,23 @@ pub(super) fn base_planes(features: &[PlaneFeature]) -> Vec<Plane> {
 /// the most. A share of the structure that does not land at half the shift, not of all of it: a
 /// long wall behind a row of boxes lands on itself at any shift along it, and when the wall is
 /// most of the structure (repeated 22082, 22145) the boxes that repeat are a small part of it.
-pub(super) fn periods(points: &[Point3<f64>], plane: &Plane) -> Vec<Vector3<f64>> {
+///
+/// `grid` indexes `points` (cells of [`LANDING_CELL`]): it is built once for the base planes of a
+/// cloud, each of which keeps its own structure.
+pub(super) fn periods(
+    points: &[Point3<f64>],
+    grid: &NeighbourGrid,
+    plane: &Plane,
+) -> Vec<Vector3<f64>> {
+    let standing: Vec<bool> = points
+        .iter()
+        .map(|p| plane.signed_distance(p).abs() >= STRUCTURE_HEIGHT)
+        .collect();
     let structure: Vec<Point3<f64>> = points
         .iter()
-        .filter(|p| plane.signed_distance(p).abs() >= STRUCTURE_HEIGHT)
-        .copied()
+        .zip(&standing)
+        .filter(|(_, s)| **s)
+        .map(|(p, _)| *p)
         .collect();
     if structure.len() < MIN_STRUCTURE {
         return Vec::new();
@@ -153,13 +165,13 @@ pub(super) fn periods(points: &[Point3<f64>], plane: &Plane) -> Vec<Vector3<f64>
             peaks.push((cell, shift));
         }
     }
-    let grid = NeighbourGrid::new(&structure, LANDING_CELL);
     // Per point of `of`, whether it lands on the structure shifted by `shift` either way.
+    let on_structure = |i: usize| standing.get(i).copied().unwrap_or(false);
     let lands = |of: &[Point3<f64>], shift: &Vector3<f64>| -> Vec<bool> {
         of.iter()
             .map(|p| {
-                grid.nearest(&(*p + shift), LANDING).is_some()
-                    || grid.nearest(&(*p - shift), LANDING).is_some()
+                grid.any_within_where(&(*p + shift), LANDING, on_structure)
+                    || grid.any_within_where(&(*p - shift), LANDING, on_structure)
             })
             .collect()
     };
@@ -248,6 +260,11 @@ pub(super) fn period_twin(
 mod tests {
     use super::*;
 
+    /// [`periods`] of `points` along `plane`, with their grid.
+    fn periods_of(points: &[Point3<f64>], plane: &Plane) -> Vec<Vector3<f64>> {
+        periods(points, &NeighbourGrid::new(points, LANDING_CELL), plane)
+    }
+
     /// Ground points on a 10 cm lattice over `[-x, x] x [-y, y]`.
     fn ground(x: f64, y: f64) -> Vec<Point3<f64>> {
         let mut points = Vec::new();
@@ -285,7 +302,7 @@ mod tests {
             let c = along * (3.9 * (k as f64 - 3.5)) + Vector3::new(0.0, 2.0, 0.0);
             colonnade.extend(column(c.x, c.y));
         }
-        let found = periods(&colonnade, &plane);
+        let found = periods_of(&colonnade, &plane);
         assert!(!found.is_empty());
         let period = found[0];
         assert!((period.norm() - 3.9).abs() < 0.1, "{period}");
@@ -298,17 +315,17 @@ mod tests {
                 wall.push(Point3::new(i as f64 * 0.1, 6.0, 0.35 + 0.1 * k as f64));
             }
         }
-        assert!(periods(&wall, &plane).is_empty());
+        assert!(periods_of(&wall, &plane).is_empty());
         // One column: nothing to repeat.
         let mut one = ground(15.0, 15.0);
         one.extend(column(-3.0, 1.0));
-        assert!(periods(&one, &plane).is_empty());
+        assert!(periods_of(&one, &plane).is_empty());
         // Two identical columns 5 m apart repeat once.
         one.extend(column(1.0, -2.0));
-        let found = periods(&one, &plane);
+        let found = periods_of(&one, &plane);
         assert!((found[0].norm() - 5.0).abs() < 0.1, "{found:?}");
         // Ground alone: nothing to repeat.
-        assert!(periods(&ground(5.0, 5.0), &plane).is_empty());
+        assert!(periods_of(&ground(5.0, 5.0), &plane).is_empty());
     }
 
     #[test]
@@ -325,7 +342,7 @@ mod tests {
         for k in -1..=1 {
             scene.extend(column(4.5 * k as f64, 2.0));
         }
-        let found = periods(&scene, &plane);
+        let found = periods_of(&scene, &plane);
         assert!(!found.is_empty());
         assert!((found[0].norm() - 4.5).abs() < 0.1, "{found:?}");
         assert!(

@@ -380,24 +380,16 @@ impl<'a> Contest<'a> {
     /// `v` and its check, when it lies within max_translation at a pose distinct from the best
     /// one; `None` otherwise.
     fn elsewhere(&self, v: Verified) -> Result<Option<(Verified, CheckReport)>> {
-        if !self.within(&v)
-            || same_pose(&v.pose, &self.best.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE)
-        {
+        if !self.is_elsewhere(&v) {
             return Ok(None);
         }
         let c = self.checks.pair()?.check(&v.pose)?;
         Ok(Some((v, c)))
     }
 
-    /// [`Contest::settled_elsewhere`] with the check's local re-alignment from `start` as the
-    /// settling, scored on the verifier's full samples.
-    fn aligned_elsewhere(
-        &self,
-        verifier: &Verifier<'_>,
-        start: &Isometry3<f64>,
-    ) -> Result<Option<(Verified, CheckReport)>> {
-        let aligned = self.checks.pair()?.aligned(start)?;
-        self.elsewhere(verifier.score_full(aligned))
+    /// Whether `v` lies within max_translation at a pose distinct from the best one.
+    fn is_elsewhere(&self, v: &Verified) -> bool {
+        self.within(v) && !same_pose(&v.pose, &self.best.pose, DISTINCT_ANGLE, DISTINCT_DISTANCE)
     }
 
     /// Whether `r` ties with the best pose and is not ruled out; one that ties only within the
@@ -739,12 +731,19 @@ pub(super) fn half_turn_rival(
         Ok(None) => (third_turns(features, SQUARE_CORNER_COSINE), true),
         Err(_) => (Vec::new(), false),
     };
-    // Each turn with whether `square_twin` judges it.
-    half_turns(features, points)
+    // Each turn with whether `square_twin` judges it, settled side by side (each settling is
+    // independent of the others; they are judged in order below).
+    let turns: Vec<(bool, Isometry3<f64>)> = half_turns(features, points)
         .into_iter()
         .map(|turn| (false, turn))
         .chain(thirds.into_iter().map(|turn| (square, turn)))
-        .filter_map(|(by_square, turn)| verifier.settle(&(turn * best)).map(|v| (by_square, v)))
+        .collect();
+    let settled = crate::par_map(&turns, |(by_square, turn)| {
+        verifier.settle(&(turn * best)).map(|v| (*by_square, v))
+    });
+    settled
+        .into_iter()
+        .flatten()
         .filter(|(_, v)| !same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE))
         .find_map(|(by_square, v)| {
             // A check that fails to run counts the turn as a rival, the cautious way.
@@ -859,12 +858,30 @@ pub(super) fn nudged_rival(
             directions.push((weakest, true));
         }
     }
+    let pair = contest.checks.pair()?;
     for (direction, by_check) in directions {
-        for offset in NUDGES {
-            let start = Translation3::from(direction * offset) * contest.best.pose;
-            let found = match contest.settled_elsewhere(verifier, &start)? {
-                None if by_check => contest.aligned_elsewhere(verifier, &start)?,
-                found => found,
+        let starts =
+            NUDGES.map(|offset| Translation3::from(direction * offset) * contest.best.pose);
+        // The restarts settled side by side, then the check's re-alignments of those that do not
+        // settle elsewhere (when the direction takes them): each is independent of the others,
+        // and they are judged in order below as one after the other.
+        let settled = crate::par_map(&starts, |start| verifier.settle(start));
+        let fallback: Vec<Option<Isometry3<f64>>> = starts
+            .iter()
+            .zip(&settled)
+            .map(|(start, v)| {
+                let elsewhere = v.as_ref().is_some_and(|v| contest.is_elsewhere(v));
+                (by_check && !elsewhere).then_some(*start)
+            })
+            .collect();
+        let aligned = crate::par_map(&fallback, |start| start.map(|s| pair.aligned(&s)));
+        for (v, aligned) in settled.into_iter().zip(aligned) {
+            let found = match v.filter(|v| contest.is_elsewhere(v)) {
+                Some(v) => contest.elsewhere(v)?,
+                None => match aligned {
+                    Some(aligned) => contest.elsewhere(verifier.score_full(aligned?))?,
+                    None => None,
+                },
             };
             let Some((v, c)) = found else {
                 continue;
