@@ -64,6 +64,9 @@
 //! # Ok::<(), lidarcal::Error>(())
 //! ```
 
+use std::collections::VecDeque;
+use std::sync::{Mutex, PoisonError};
+
 use nalgebra::{Isometry3, Point3};
 
 use crate::error::{ensure_points, ensure_positive, Error, Result};
@@ -350,7 +353,14 @@ pub struct PreparedPair {
     target: Side,
     noise: f64,
     options: CheckOptions,
+    /// The last [`CHECKS_KEPT`] checks, by the exact pose checked: a method choosing between
+    /// poses may check one twice, or check several side by side ([`PreparedPair::check_all`])
+    /// before judging them one after the other.
+    checked: Mutex<VecDeque<(Isometry3<f64>, CheckReport)>>,
 }
+
+/// Checks a [`PreparedPair`] keeps (a few kilobytes).
+const CHECKS_KEPT: usize = 32;
 
 impl PreparedPair {
     /// Prepares `reference` and `target` (each in its own sensor's frame) under `options`.
@@ -383,6 +393,7 @@ impl PreparedPair {
             target: g,
             noise,
             options: *options,
+            checked: Mutex::new(VecDeque::new()),
         })
     }
 
@@ -428,10 +439,56 @@ impl PreparedPair {
             .map_or(*reference_from_target, |icp| icp.pose))
     }
 
-    /// [`check`] on the prepared pair.
+    /// [`check`] on the prepared pair. The pair keeps its last few reports: a pose checked
+    /// again is not checked twice.
     ///
     /// Errors: [`Error::InvalidInput`] for a non-finite transform.
     pub fn check(&self, reference_from_target: &Isometry3<f64>) -> Result<CheckReport> {
+        if let Some(report) = self.kept(reference_from_target) {
+            return Ok(report);
+        }
+        let report = self.check_fresh(reference_from_target)?;
+        self.keep(reference_from_target, &report);
+        Ok(report)
+    }
+
+    /// Checks `poses` side by side and keeps the reports, so that [`PreparedPair::check`] of
+    /// each returns at once: for a method that judges several poses in order and would check
+    /// most of them anyway. A pose whose check fails is left for `check` to report.
+    pub(crate) fn check_all(&self, poses: &[Isometry3<f64>]) {
+        let fresh: Vec<Isometry3<f64>> = poses
+            .iter()
+            .filter(|p| self.kept(p).is_none())
+            .copied()
+            .collect();
+        let reports = crate::par_map(&fresh, |pose| self.check_fresh(pose).ok());
+        for (pose, report) in fresh.iter().zip(reports) {
+            if let Some(report) = report {
+                self.keep(pose, &report);
+            }
+        }
+    }
+
+    /// The kept report of exactly `pose`, if any.
+    fn kept(&self, pose: &Isometry3<f64>) -> Option<CheckReport> {
+        let kept = self.checked.lock().unwrap_or_else(PoisonError::into_inner);
+        kept.iter().find(|(p, _)| p == pose).map(|(_, r)| r.clone())
+    }
+
+    /// Keeps `report` as the check of `pose`, dropping the oldest beyond [`CHECKS_KEPT`].
+    fn keep(&self, pose: &Isometry3<f64>, report: &CheckReport) {
+        let mut kept = self.checked.lock().unwrap_or_else(PoisonError::into_inner);
+        if kept.iter().any(|(p, _)| p == pose) {
+            return;
+        }
+        if kept.len() == CHECKS_KEPT {
+            kept.pop_front();
+        }
+        kept.push_back((*pose, report.clone()));
+    }
+
+    /// [`PreparedPair::check`] without the kept reports.
+    fn check_fresh(&self, reference_from_target: &Isometry3<f64>) -> Result<CheckReport> {
         ensure_transform(reference_from_target)?;
         let t = reference_from_target;
         let inverse = t.inverse();
@@ -509,5 +566,26 @@ mod tests {
         assert!((moved.translation.vector - truth.translation.vector).norm() < 0.05);
         let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
         assert!(matches!(pair.aligned(&nan), Err(Error::InvalidInput(_))));
+    }
+
+    #[test]
+    fn kept_and_side_by_side_checks_are_the_checks_of_a_fresh_pair() {
+        let scene = street_scene(&StreetOptions::default()).unwrap();
+        let (reference, target) = (scene.reference.positions(), scene.target.positions());
+        let options = CheckOptions::default();
+        let truth = scene.reference_from_target;
+        let poses: Vec<Isometry3<f64>> = (0..CHECKS_KEPT + 3)
+            .map(|k| Translation3::new(0.0, 0.02 * k as f64, 0.0) * truth)
+            .collect();
+        let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
+        let pair = PreparedPair::new(&reference, &target, &options).unwrap();
+        // More poses than are kept, and one whose check fails.
+        pair.check_all(&[poses.as_slice(), &[nan]].concat());
+        assert!(matches!(pair.check(&nan), Err(Error::InvalidInput(_))));
+        for pose in [poses[0], poses[CHECKS_KEPT + 2], poses[5], poses[5]] {
+            let fresh = PreparedPair::new(&reference, &target, &options).unwrap();
+            assert_eq!(pair.check(&pose).unwrap(), fresh.check(&pose).unwrap());
+        }
+        assert!(pair.checked.lock().unwrap().len() <= CHECKS_KEPT);
     }
 }

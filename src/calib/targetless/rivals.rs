@@ -597,6 +597,8 @@ pub(super) fn clearer_contender(
     // An unverifiable contender is weighed only against a weakly held result.
     let result_weak = report.weakest_translation.1 < UNVERIFIED_BEST_SHARE;
     let mut seen = vec![*result, best.pose];
+    // The contenders judged, with whether by every rule and whether turned.
+    let mut judged: Vec<(Verified, bool, bool)> = Vec::new();
     for v in ranked {
         // The result and the best verified pose, then at most MAX_TURNED_CONTENDERS contenders
         // (the first MAX_POLISHED of them, scoring CLEARER_CONTENDER_RATIO or more, judged by
@@ -614,9 +616,16 @@ pub(super) fn clearer_contender(
             seen.len() < MAX_POLISHED + 2 && v.score >= CLEARER_CONTENDER_RATIO * best.score;
         seen.push(v.pose);
         let turned = pose_error(&v.pose, result).0 >= RULED_OUT_TURN;
-        if !(every_rule || turned) {
-            continue;
+        if every_rule || turned {
+            judged.push((v, every_rule, turned));
         }
+    }
+    // Checked side by side, then judged in order.
+    if !judged.is_empty() {
+        let poses: Vec<Isometry3<f64>> = judged.iter().map(|(v, ..)| v.pose).collect();
+        checks.pair()?.check_all(&poses);
+    }
+    for (v, every_rule, turned) in judged {
         let c = checks.pair()?.check(&v.pose)?;
         let gain = agreement_gain(report, &c);
         let free = c.free_share();
@@ -741,25 +750,39 @@ pub(super) fn half_turn_rival(
     let settled = crate::par_map(&turns, |(by_square, turn)| {
         verifier.settle(&(turn * best)).map(|v| (*by_square, v))
     });
-    settled
+    let distinct: Vec<(bool, Verified)> = settled
         .into_iter()
         .flatten()
         .filter(|(_, v)| !same_pose(&v.pose, &best, DISTINCT_ANGLE, DISTINCT_DISTANCE))
-        .find_map(|(by_square, v)| {
-            // A check that fails to run counts the turn as a rival, the cautious way.
-            if contest.rival(&v).unwrap_or(true) {
-                return Some((v, Rival::Tie));
-            }
-            let rival = if by_square {
-                contest.square_twin(&v)
-            } else {
-                contest.symmetry_rival(&v)
-            };
-            match rival {
-                Ok(rival) => rival.map(|r| (v, r)),
-                Err(_) => Some((v, Rival::Tie)),
-            }
-        })
+        .collect();
+    // The turns the judgement below checks (a tie, or a turn within range turned far enough),
+    // checked side by side first; it then reads their reports as it comes to them.
+    if let (Ok(pair), Ok(Some(_))) = (contest.checks.pair(), contest.best_check()) {
+        let poses: Vec<Isometry3<f64>> = distinct
+            .iter()
+            .filter(|(_, v)| {
+                contest.ties(v)
+                    || (contest.within(v) && pose_error(&v.pose, &best).0 >= RULED_OUT_TURN)
+            })
+            .map(|(_, v)| v.pose)
+            .collect();
+        pair.check_all(&poses);
+    }
+    distinct.into_iter().find_map(|(by_square, v)| {
+        // A check that fails to run counts the turn as a rival, the cautious way.
+        if contest.rival(&v).unwrap_or(true) {
+            return Some((v, Rival::Tie));
+        }
+        let rival = if by_square {
+            contest.square_twin(&v)
+        } else {
+            contest.symmetry_rival(&v)
+        };
+        match rival {
+            Ok(rival) => rival.map(|r| (v, r)),
+            Err(_) => Some((v, Rival::Tie)),
+        }
+    })
 }
 
 /// A repeated structure along the direction `free` the best plane pair leaves free (a colonnade)
