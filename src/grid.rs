@@ -355,6 +355,15 @@ mod tests {
         best
     }
 
+    /// A query within 6 m of the origin across and `z` up or down.
+    fn random_query(rng: &mut ChaCha8Rng, z: f64) -> Point3<f64> {
+        Point3::new(
+            rng.random_range(-6.0..6.0),
+            rng.random_range(-6.0..6.0),
+            rng.random_range(-z..z),
+        )
+    }
+
     #[test]
     fn nearest_matches_brute_force_at_every_radius_it_reaches() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
@@ -379,11 +388,7 @@ mod tests {
         points.push(Point3::new(-1e6, 2e6, 5.0));
         let grid = NeighbourGrid::new(&points, 0.5);
         for _ in 0..3000 {
-            let q = Point3::new(
-                rng.random_range(-6.0..6.0),
-                rng.random_range(-6.0..6.0),
-                rng.random_range(-4.0..4.0),
-            );
+            let q = random_query(&mut rng, 4.0);
             for d in [0.05, 0.3, 0.45, 0.5] {
                 assert!(grid.reaches(d));
                 let (g, b) = (grid.nearest(&q, d), brute(&points, &q, d));
@@ -391,11 +396,7 @@ mod tests {
             }
         }
         for _ in 0..1000 {
-            let q = Point3::new(
-                rng.random_range(-6.0..6.0),
-                rng.random_range(-6.0..6.0),
-                rng.random_range(-1.0..1.0),
-            );
+            let q = random_query(&mut rng, 1.0);
             for (k, d) in [(1, 0.3), (10, 0.5), (10, 0.45), (25, 0.2)] {
                 let mut all: Vec<(usize, f64)> = points
                     .iter()
@@ -410,11 +411,7 @@ mod tests {
         }
         // Whether any point within d passes a filter (odd indices), against brute force.
         for _ in 0..1000 {
-            let q = Point3::new(
-                rng.random_range(-6.0..6.0),
-                rng.random_range(-6.0..6.0),
-                rng.random_range(-1.0..1.0),
-            );
+            let q = random_query(&mut rng, 1.0);
             for d in [0.05, 0.15, 0.5, 1.2] {
                 let expected = points
                     .iter()
