@@ -492,10 +492,13 @@ impl PreparedPair {
         ensure_transform(reference_from_target)?;
         let t = reference_from_target;
         let inverse = t.inverse();
-        // Agreement both ways at the given pose, and free space both ways.
-        let (agreement, free_space) = crate::join(|| self.agreement(t), || self.free_space(t));
-        // Local re-alignment and observability.
-        let icp = self.realign(t)?;
+        // Agreement both ways at the given pose and free space both ways, beside the local
+        // re-alignment (which does not depend on them) and its observability.
+        let ((agreement, free_space), icp) = crate::join(
+            || crate::join(|| self.agreement(t), || self.free_space(t)),
+            || self.realign(t),
+        );
+        let icp = icp?;
         let correction = Correction::new(icp.as_ref(), t, &inverse);
         let agreement_gain = icp
             .as_ref()
