@@ -248,12 +248,7 @@ impl NeighbourGrid {
     /// Inserts the points of cell `key` within `limit` (squared) into the sorted `best`, keeping
     /// at most `k`.
     fn collect(&self, key: u64, q: &[f64; 3], k: usize, limit: f64, best: &mut Vec<(f64, u32)>) {
-        let Some(&(start, end)) = self.cells.get(&key) else {
-            return;
-        };
-        let (start, end) = (start as usize, end as usize);
-        let (Some(points), Some(ids)) = (self.sorted.get(start..end), self.ids.get(start..end))
-        else {
+        let Some((points, ids)) = self.cell(key) else {
             return;
         };
         for (p, &id) in points.iter().zip(ids) {
@@ -287,13 +282,7 @@ impl NeighbourGrid {
         for cx in span(q.x) {
             for cy in span(q.y) {
                 for cz in span(q.z) {
-                    let Some(&(start, end)) = self.cells.get(&key([cx, cy, cz])) else {
-                        continue;
-                    };
-                    let (start, end) = (start as usize, end as usize);
-                    let (Some(points), Some(ids)) =
-                        (self.sorted.get(start..end), self.ids.get(start..end))
-                    else {
+                    let Some((points, ids)) = self.cell(key([cx, cy, cz])) else {
                         continue;
                     };
                     let hit = points.iter().zip(ids).any(|(p, &id)| {
@@ -309,14 +298,16 @@ impl NeighbourGrid {
         false
     }
 
+    /// The points of cell `key` (sorted coordinates and their input indices), if it has any.
+    fn cell(&self, key: u64) -> Option<(&[[f64; 3]], &[u32])> {
+        let &(start, end) = self.cells.get(&key)?;
+        let (start, end) = (start as usize, end as usize);
+        Some((self.sorted.get(start..end)?, self.ids.get(start..end)?))
+    }
+
     /// Updates `best` with the points of cell `k` within `bound` (squared).
     fn scan(&self, k: u64, q: &[f64; 3], best: &mut Option<(u32, f64)>, bound: &mut f64) {
-        let Some(&(start, end)) = self.cells.get(&k) else {
-            return;
-        };
-        let (start, end) = (start as usize, end as usize);
-        let (Some(points), Some(ids)) = (self.sorted.get(start..end), self.ids.get(start..end))
-        else {
+        let Some((points, ids)) = self.cell(k) else {
             return;
         };
         for (p, &id) in points.iter().zip(ids) {

@@ -888,23 +888,22 @@ pub(super) fn nudged_rival(
         // The restarts settled side by side, then the check's re-alignments of those that do not
         // settle elsewhere (when the direction takes them): each is independent of the others,
         // and they are judged in order below as one after the other.
-        let settled = crate::par_map(&starts, |start| verifier.settle(start));
+        let elsewhere: Vec<Option<Verified>> =
+            crate::par_map(&starts, |start| verifier.settle(start))
+                .into_iter()
+                .map(|v| v.filter(|v| contest.is_elsewhere(v)))
+                .collect();
         let fallback: Vec<Option<Isometry3<f64>>> = starts
             .iter()
-            .zip(&settled)
-            .map(|(start, v)| {
-                let elsewhere = v.as_ref().is_some_and(|v| contest.is_elsewhere(v));
-                (by_check && !elsewhere).then_some(*start)
-            })
+            .zip(&elsewhere)
+            .map(|(start, v)| (by_check && v.is_none()).then_some(*start))
             .collect();
         let aligned = crate::par_map(&fallback, |start| start.map(|s| pair.aligned(&s)));
-        for (v, aligned) in settled.into_iter().zip(aligned) {
-            let found = match v.filter(|v| contest.is_elsewhere(v)) {
-                Some(v) => contest.elsewhere(v)?,
-                None => match aligned {
-                    Some(aligned) => contest.elsewhere(verifier.score_full(aligned?))?,
-                    None => None,
-                },
+        for (v, aligned) in elsewhere.into_iter().zip(aligned) {
+            let found = match (v, aligned) {
+                (Some(v), _) => contest.elsewhere(v)?,
+                (None, Some(aligned)) => contest.elsewhere(verifier.score_full(aligned?))?,
+                (None, None) => None,
             };
             let Some((v, c)) = found else {
                 continue;
