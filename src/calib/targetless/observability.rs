@@ -6,6 +6,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::options::TargetlessOptions;
 use super::segment::PlaneFeature;
+use super::SWEEP_FACTOR;
 use crate::error::{Error, FailureKind, Result};
 use crate::icp::{weakest_direction, weakest_directions, IcpResult};
 use crate::lm::LmReport;
@@ -23,11 +24,13 @@ pub(super) struct Observability {
 /// The observability of the final problem: the final ICP's information (`sum w n n^T` over its
 /// correspondences) when it ran, else the plane refinement's (`report`). `Err(Calibration)` with
 /// [`FailureKind::Unobservable`] naming the weak direction when its share is below
-/// `options.min_information_share`.
+/// `options.min_information_share` ([`SWEEP_FACTOR`] times that for the translation of a pose
+/// from the ground `sweep`).
 pub(super) fn observability(
     matched: &[&PlaneFeature],
     icp: Option<&IcpResult>,
     report: Option<&LmReport>,
+    sweep: bool,
     options: &TargetlessOptions,
 ) -> Result<Observability> {
     let mut plane_info = Matrix3::zeros();
@@ -50,18 +53,28 @@ pub(super) fn observability(
         "the matched planes"
     };
     let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
-    if weakest_translation.1 < options.min_information_share {
+    let translation_floor = if sweep {
+        SWEEP_FACTOR * options.min_information_share
+    } else {
+        options.min_information_share
+    };
+    if weakest_translation.1 < translation_floor {
         return Err(Error::calibration(
             FailureKind::Unobservable,
             format!(
                 "the scene does not constrain the translation along {} (reference frame): it \
-                 holds {:.2} % of the translation information of {source} (< {:.2} %); the \
+                 holds {:.2} % of the translation information of {source} (< {:.2} %{}); the \
                  matched planes' normals span {} direction(s) (as in a corridor or a straight \
                  street with only ground and parallel walls); add structure across that \
                  direction (a cross wall, poles, a building corner)",
                 fmt(&weakest_translation.0),
                 100.0 * weakest_translation.1,
-                100.0 * options.min_information_share,
+                100.0 * translation_floor,
+                if sweep {
+                    " for a pose from the ground sweep"
+                } else {
+                    ""
+                },
                 if plane_translation_share > 1e-3 {
                     3
                 } else if matched.len() > 1 {

@@ -49,7 +49,8 @@ pub struct TargetlessOptions {
     /// Options of the final ICP.
     pub icp_options: IcpOptions,
     /// Smallest share of the translation (and rotation) information in its weakest direction;
-    /// below it the calibration is refused as unobservable.
+    /// below it the calibration is refused as unobservable. A pose grown from the ground sweep
+    /// must hold one and a half times this in its weakest translation direction.
     pub min_information_share: f64,
     /// Smallest share of the sampled target points the best verified pose brings within 25 cm of
     /// the reference; below it the calibration is refused as no agreement. A pose grown from the
