@@ -492,8 +492,9 @@ def test_families_list_methods_they_can_use() -> None:
 #: turn fits as well. Repeated 21027: a colonnade, the result shifted by its period fits as well;
 #: repeated 22082 the same before a long wall. Poles 22091: a pose 0.95 m from the best verifies
 #: within the noise and fits as well; the best, from the ground sweep, holds 1.12 % of the
-#: translation information in its weakest direction, and that refuses it first. Corridor 23152: its half turn (the truth) is unverifiable
-#: along the vertical, which the best pose barely holds either, and fits as well. Corner 23000:
+#: translation information in its weakest direction, and that refuses it first. Corridor
+#: 23152: its half turn (the truth) is unverifiable along the vertical, which the best pose
+#: barely holds either, and fits as well. Corner 23000:
 #: an unverifiable contender within range fits clearly better than a weakly held result.
 #: Corner 24150: a contender turned 89 degrees passes the check where it settles and fits
 #: clearly better. Corner 40193: the truth, the sixth contender and turned 81 degrees from the
@@ -504,7 +505,9 @@ def test_families_list_methods_they_can_use() -> None:
 #: passing ordering is a half turn, is enclosed, where the check does not break ties. Corner
 #: 60098 (a target on its side, 130 degrees off) and poles 50073 (92 cm along the ground): poses
 #: from the ground sweep holding 1.00 % and 1.14 % of the translation information in their
-#: weakest direction, under the sweep's floor of 1.5 %.
+#: weakest direction, under the sweep's floor of 1.5 %. Corner 70108: the result, 1.5 m along
+#: the long wall, puts 19 % of the target's points into free space; the truth, the second
+#: contender, passes the check and puts none there, though it agrees less on a smaller overlap.
 REFUSED = [
     ("corner", 21188, "targetless", "ambiguous", "the corner's three planes are square"),
     ("repeated", 21027, "targetless", "ambiguous", "the reference repeats itself every"),
@@ -519,6 +522,7 @@ REFUSED = [
     ("repeated", 7116, "targetless", "no_agreement", "from the ground sweep"),
     ("corner", 60098, "targetless", "unobservable", "for a pose from the ground sweep"),
     ("poles", 50073, "targetless", "unobservable", "for a pose from the ground sweep"),
+    ("corner", 70108, "targetless", "ambiguous", "keeps the free space clear (0.0 %"),
     ("corridor", 19099, "planes", "ambiguous", "only one passes the check, but it overlaps 28 %"),
     ("corner", 24019, "planes", "ambiguous", "only one passes the check, but it overlaps"),
     ("corridor", 13001, "planes", "ambiguous", "two orderings fit the normals equally well"),

@@ -90,16 +90,18 @@
 //! 6. **Observability.** The calibration is refused when the data do not constrain all six
 //!    degrees of freedom: the weakest direction of the translation (and rotation) information of
 //!    the final problem (`sum w n n^T` over the ICP correspondences, or over the matched planes
-//!    without ICP) must hold at least [`TargetlessOptions::min_information_share`] of it. A
+//!    without ICP) must hold at least [`TargetlessOptions::min_information_share`] of it (one and
+//!    a half times that in translation for a pose from the ground sweep). A
 //!    corridor (floor and parallel walls) has none along its axis and is refused with that
 //!    direction named; so is a pose that only planes constrain when their normals span fewer than
 //!    three directions. It is also refused when ICP carried the target beyond
 //!    [`TargetlessOptions::max_translation`]. The result, once it passes the check, is refused
 //!    as ambiguous (with `refuse_ambiguous`) when a distinct verified contender scoring at least
-//!    half the best passes the check too, agrees on its overlap 10 points better both ways and
-//!    keeps the free space clearly clearer (or puts no more points there than the result and at
-//!    most 1 %): the score, a share of all target points, can prefer a wrong pose that overlaps
-//!    more. The best verified pose is also refused when it brings under
+//!    half the best passes the check too and agrees on its overlap 6 points better both ways
+//!    putting at most 1 % more of the points into free space, or 2 points better keeping the free
+//!    space clearer, or puts at most 1 % of the points into free space where the result puts
+//!    10 % or more: the score, a share of all target points, can prefer a wrong pose
+//!    that overlaps more. The best verified pose is also refused when it brings under
 //!    [`TargetlessOptions::min_agreement`] of the target points into agreement.
 //!
 //! # Limits
