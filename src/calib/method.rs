@@ -10,7 +10,9 @@
 //! and their certificates are within [`MethodOptions::auto_margin`]. When the targetless method
 //! is refused only as ambiguous, its best pose is computed again as a witness, never returned: a
 //! corner-method result it leads by `auto_margin` or more, from a pose the checks tell apart, is
-//! refused the same way. A method that fails with
+//! refused the same way; so is a result beyond the targetless method's
+//! [`max_translation`](TargetlessOptions::max_translation) when that method was refused as out
+//! of range and its best pose without the bound lies elsewhere. A method that fails with
 //! [`Error::Calibration`] is skipped (its reason and kind are kept for the error when none
 //! succeeds); malformed input is returned at once.
 //!
@@ -252,6 +254,7 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     let mut results = Vec::new();
     let mut reasons = Vec::new();
     let mut targetless_ambiguous = false;
+    let mut targetless_out_of_range = false;
     // The methods are independent and each gives the same result on any thread count: side by
     // side, so the wall time is nearer the slowest method's than the sum (the corner method
     // spends 0.3 s refusing a hesai P64 scan while the targetless method works).
@@ -264,6 +267,8 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
             Err(Error::Calibration { kind, message }) => {
                 targetless_ambiguous |=
                     method == Method::Targetless && kind == FailureKind::Ambiguous;
+                targetless_out_of_range |=
+                    method == Method::Targetless && kind == FailureKind::OutOfRange;
                 reasons.push((kind, format!("{}: {message}", method.name())))
             }
             Err(e) => return Err(e),
@@ -319,7 +324,60 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
             contradicted_by(&chosen, &witness, options)?;
         }
     }
+    let distance = chosen.reference_from_target.translation.vector.norm();
+    if targetless_out_of_range && distance > options.targetless.max_translation {
+        out_of_range_witness(&chosen, reference, target, options)?;
+    }
     Ok(chosen)
+}
+
+/// `Err(InconsistentMethods)` when `chosen`, another method's result beyond the targetless
+/// method's `max_translation` while that method was refused as out of range, is not where the
+/// targetless method's best pose puts the target. That pose is computed again without the bound
+/// and never returned. The refusal says the clouds agree best beyond the bound, which backs a
+/// result out there only if the two are one pose: in a partial-overlap street (adversarial partial
+/// 80162) the corner method's pose, 17 m out and turned 90 degrees, passed its check (16 %
+/// overlap), while the targetless method's best lay 7.1 m out; where the corner method was right,
+/// 6.4-6.5 m out (partial 60135 and 80080), the targetless method's best was that pose. When the
+/// unbounded run fails as well, nothing speaks against `chosen`.
+fn out_of_range_witness(
+    chosen: &Calibration,
+    reference: Cloud<'_>,
+    target: Cloud<'_>,
+    options: &MethodOptions,
+) -> Result<()> {
+    let unbounded = TargetlessOptions {
+        max_translation: f64::INFINITY,
+        ..options.targetless
+    };
+    let witness = match calibrate_targetless(reference.points, target.points, &unbounded) {
+        Ok(c) => c.into_any(),
+        Err(Error::Calibration { .. }) => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    let apart = Separation::new(chosen, &witness);
+    if !apart.disagree() {
+        return Ok(());
+    }
+    Err(Error::calibration(
+        FailureKind::InconsistentMethods,
+        format!(
+            "the {} method puts the target {:.2} m away, beyond max_translation ({:.2} m), where \
+             the targetless method was refused as out of range; without that bound its best pose \
+             lies {:.2} m away, {:.2} deg / {:.1} cm from the {} method's (beyond their tolerance \
+             of {:.2} deg / {:.1} cm): calibrate with one method, or raise max_translation if the \
+             sensors are that far apart",
+            chosen.method().name(),
+            chosen.reference_from_target.translation.vector.norm(),
+            options.targetless.max_translation,
+            witness.reference_from_target.translation.vector.norm(),
+            apart.angle.to_degrees(),
+            apart.distance * 100.0,
+            chosen.method().name(),
+            apart.rotation_tolerance.to_degrees(),
+            apart.translation_tolerance * 100.0,
+        ),
+    ))
 }
 
 /// The targetless method's best pose when it was refused only as ambiguous: run again without

@@ -337,6 +337,18 @@ def test_solvable_scene_is_solved(family: str, seed: int, method: str) -> None:
     assert result.check.verdict == "consistent"
 
 
+def test_auto_keeps_a_far_result_the_targetless_best_pose_confirms() -> None:
+    # The sensors are 6.5 m apart, beyond the targetless method's max_translation (5 m): it is
+    # refused as out of range, but its best pose without the bound is the corner method's, so
+    # auto keeps that (partial 80162, where the two differ, is refused in REFUSED).
+    scene = scenarios.make("partial", 60135)
+    assert np.linalg.norm(scene.reference_from_target[:3, 3]) > 5.0
+    result = lidarcal.calibrate(scene.reference, scene.target, method="auto")
+    assert result.method == "planes"
+    rot, trans = _errors(scene.reference_from_target, np.asarray(result.transform))
+    assert rot <= ROT_TOL and trans <= TRANS_TOL, (np.degrees(rot), trans)
+
+
 def test_check_does_not_follow_a_realignment_into_free_space() -> None:
     # The true pose of this 16-beam corner: point-to-plane re-alignment pulls it 28 cm down onto
     # box tops, where 4 % of the points land in space the other sensor saw through (none here).
@@ -508,6 +520,8 @@ def test_families_list_methods_they_can_use() -> None:
 #: weakest direction, under the sweep's floor of 1.5 %. Corner 70108: the result, 1.5 m along
 #: the long wall, puts 19 % of the target's points into free space; the truth, the second
 #: contender, passes the check and puts none there, though it agrees less on a smaller overlap.
+#: Partial 80162: `auto` had the corner method's pose 17 m out and turned 90 degrees, where the
+#: targetless method, refused as out of range, found its best pose 7.1 m out (the truth).
 REFUSED = [
     ("corner", 21188, "targetless", "ambiguous", "the corner's three planes are square"),
     ("repeated", 21027, "targetless", "ambiguous", "the reference repeats itself every"),
@@ -523,6 +537,13 @@ REFUSED = [
     ("corner", 60098, "targetless", "unobservable", "for a pose from the ground sweep"),
     ("poles", 50073, "targetless", "unobservable", "for a pose from the ground sweep"),
     ("corner", 70108, "targetless", "ambiguous", "keeps the free space clear (0.0 %"),
+    (
+        "partial",
+        80162,
+        "auto",
+        "inconsistent_methods",
+        "where the targetless method was refused as out of range",
+    ),
     ("corridor", 19099, "planes", "ambiguous", "only one passes the check, but it overlaps 28 %"),
     ("corner", 24019, "planes", "ambiguous", "only one passes the check, but it overlaps"),
     ("corridor", 13001, "planes", "ambiguous", "two orderings fit the normals equally well"),
