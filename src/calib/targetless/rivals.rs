@@ -1094,22 +1094,27 @@ pub(super) fn ambiguity_message(
             );
         }
         Some(Rival::ClearerContender { best, other }) => {
+            let head = format!(
+                "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower (scores \
+                 {second_score:.3} and {best_score:.3}{beyond})",
+                angle.to_degrees()
+            );
+            let agreements = format!(
+                "agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %",
+                100.0 * other[0],
+                100.0 * other[1],
+                100.0 * best[0],
+                100.0 * best[1]
+            );
+            let (free, best_free) = (100.0 * other[2], 100.0 * best[2]);
+            let why = "the best pose may owe its score to a larger, wrong overlap; add structure \
+                       both sensors see";
             if other[0] < best[0] || other[1] < best[1] {
                 // Counted for the free space alone ([`FREE_ALONE`]).
                 return format!(
-                    "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower \
-                     (scores {second_score:.3} and {best_score:.3}{beyond}) and agrees less \
-                     (agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %), but passes the check \
-                     and keeps the free space clear ({:.1} % of the points where the other sensor \
-                     saw through, against {:.1} %): the best pose may owe its score to a larger, \
-                     wrong overlap; add structure both sensors see",
-                    angle.to_degrees(),
-                    100.0 * other[0],
-                    100.0 * other[1],
-                    100.0 * best[0],
-                    100.0 * best[1],
-                    100.0 * other[2],
-                    100.0 * best[2]
+                    "{head} and agrees less ({agreements}), but passes the check and keeps the \
+                     free space clear ({free:.1} % of the points where the other sensor saw \
+                     through, against {best_free:.1} %): {why}"
                 );
             }
             let clear = if other[2] <= best[2] {
@@ -1118,18 +1123,8 @@ pub(super) fn ambiguity_message(
                 "nearly as clear"
             };
             return format!(
-                "ambiguous: a pose {:.1} deg and {distance:.2} m from the best ranks lower (scores \
-                 {second_score:.3} and {best_score:.3}{beyond}) but fits where the clouds overlap \
-                 clearly better (agreement {:.0} % / {:.0} % against {:.0} % / {:.0} %) and keeps the \
-                 free space {clear} ({:.1} % against {:.1} %): the best pose may owe its score to a \
-                 larger, wrong overlap; add structure both sensors see",
-                angle.to_degrees(),
-                100.0 * other[0],
-                100.0 * other[1],
-                100.0 * best[0],
-                100.0 * best[1],
-                100.0 * other[2],
-                100.0 * best[2]
+                "{head} but fits where the clouds overlap clearly better ({agreements}) and keeps \
+                 the free space {clear} ({free:.1} % against {best_free:.1} %): {why}"
             );
         }
         Some(Rival::Tie) | None => {}
