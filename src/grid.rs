@@ -42,6 +42,11 @@ fn cell_of(x: f64, inverse: f64) -> i64 {
     (x * inverse).floor() as i64
 }
 
+/// The squared distance between `p` and `q`.
+fn squared_distance(p: &[f64; 3], q: &[f64; 3]) -> f64 {
+    (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)
+}
+
 /// The packed key of cell `c`.
 fn key(c: [i64; 3]) -> u64 {
     ((c[0] as u64 & KEY_MASK) << (2 * KEY_BITS))
@@ -252,7 +257,7 @@ impl NeighbourGrid {
             return;
         };
         for (p, &id) in points.iter().zip(ids) {
-            let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+            let d2 = squared_distance(p, q);
             // Also skips NaN (a non-finite query).
             if d2.partial_cmp(&limit).is_none_or(|o| o.is_gt()) {
                 continue;
@@ -277,6 +282,7 @@ impl NeighbourGrid {
         keep: impl Fn(usize) -> bool,
     ) -> bool {
         let limit = distance * distance;
+        let at = [q.x, q.y, q.z];
         let span =
             |x: f64| cell_of(x - distance, self.inverse)..=cell_of(x + distance, self.inverse);
         for cx in span(q.x) {
@@ -285,10 +291,10 @@ impl NeighbourGrid {
                     let Some((points, ids)) = self.cell(key([cx, cy, cz])) else {
                         continue;
                     };
-                    let hit = points.iter().zip(ids).any(|(p, &id)| {
-                        let d2 = (p[0] - q.x).powi(2) + (p[1] - q.y).powi(2) + (p[2] - q.z).powi(2);
-                        d2 <= limit && keep(id as usize)
-                    });
+                    let hit = points
+                        .iter()
+                        .zip(ids)
+                        .any(|(p, &id)| squared_distance(p, &at) <= limit && keep(id as usize));
                     if hit {
                         return true;
                     }
@@ -311,7 +317,7 @@ impl NeighbourGrid {
             return;
         };
         for (p, &id) in points.iter().zip(ids) {
-            let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+            let d2 = squared_distance(p, q);
             let better = match *best {
                 None => d2 <= *bound,
                 Some((b, bd)) => d2 < bd || (d2 == bd && id < b),
