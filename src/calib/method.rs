@@ -350,10 +350,8 @@ fn out_of_range_witness(
         max_translation: f64::INFINITY,
         ..options.targetless
     };
-    let witness = match calibrate_targetless(reference.points, target.points, &unbounded) {
-        Ok(c) => c.into_any(),
-        Err(Error::Calibration { .. }) => return Ok(()),
-        Err(e) => return Err(e),
+    let Some(witness) = targetless_witness(reference, target, &unbounded)? else {
+        return Ok(());
     };
     let apart = Separation::new(chosen, &witness);
     if !apart.disagree() {
@@ -395,7 +393,17 @@ fn ambiguous_witness(
         refuse_ambiguous: false,
         ..options.targetless
     };
-    match calibrate_targetless(reference.points, target.points, &relaxed) {
+    targetless_witness(reference, target, &relaxed)
+}
+
+/// The targetless method's result under `options` (relaxed from the caller's), never returned
+/// but weighed against another method's: `None` when it is refused as well.
+fn targetless_witness(
+    reference: Cloud<'_>,
+    target: Cloud<'_>,
+    options: &TargetlessOptions,
+) -> Result<Option<Calibration>> {
+    match calibrate_targetless(reference.points, target.points, options) {
         Ok(c) => Ok(Some(c.into_any())),
         Err(Error::Calibration { .. }) => Ok(None),
         Err(e) => Err(e),
