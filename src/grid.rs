@@ -56,7 +56,7 @@ fn key(c: [i64; 3]) -> u64 {
 
 impl NeighbourGrid {
     /// Indexes `points` (fewer than 2^32, finite) in cells of side `cell` metres (positive).
-    pub(crate) fn new(points: &[Point3<f64>], cell: f64) -> Self {
+    pub(crate) fn new<P: Copy + Into<[f64; 3]>>(points: &[P], cell: f64) -> Self {
         let inverse = 1.0 / cell;
         // A counting sort: number the cells as they are first met, count their points, and
         // place each point after those of the cells numbered before its own. A cell's points
@@ -67,11 +67,12 @@ impl NeighbourGrid {
         let mut counts: Vec<u32> = Vec::new();
         let cell_ids: Vec<u32> = points
             .iter()
-            .map(|p| {
+            .map(|&p| {
+                let [x, y, z] = p.into();
                 let k = key([
-                    cell_of(p.x, inverse),
-                    cell_of(p.y, inverse),
-                    cell_of(p.z, inverse),
+                    cell_of(x, inverse),
+                    cell_of(y, inverse),
+                    cell_of(z, inverse),
                 ]);
                 let next = counts.len() as u32;
                 let id = *slots.entry(k).or_insert(next);
@@ -106,7 +107,7 @@ impl NeighbourGrid {
                 if let (Some(s), Some(d)) =
                     (sorted.get_mut(*at as usize), ids.get_mut(*at as usize))
                 {
-                    *s = [p.x, p.y, p.z];
+                    *s = (*p).into();
                     *d = i;
                 }
                 *at += 1;
@@ -438,7 +439,7 @@ mod tests {
         let inf = Point3::new(f64::INFINITY, f64::NEG_INFINITY, 0.0);
         assert_eq!(grid.nearest(&inf, 1.0), None);
         assert_eq!(
-            NeighbourGrid::new(&[], 0.5).nearest(&Point3::origin(), 1.0),
+            NeighbourGrid::new::<Point3<f64>>(&[], 0.5).nearest(&Point3::origin(), 1.0),
             None
         );
     }

@@ -138,15 +138,18 @@ fn downsample(
                 })
             }))
     })?;
-    let (sums, owner) = match packed {
+    let (Grouped { mut sums, counts }, owner) = match packed {
         Some(grouped) => grouped,
         None => group_by_key(points, owners, |p| cell(p).map(Some))?
             .ok_or_else(|| Error::Numerical("voxel keys could not be formed".into()))?,
     };
-    let centroids = sums
-        .into_iter()
-        .map(|(sum, n)| Point3::from(sum / n.max(1) as f64))
-        .collect();
+    for (sum, n) in sums.iter_mut().zip(&counts) {
+        *sum /= (*n).max(1) as f64;
+    }
+    // The means become the centroids in place (same layout: no second buffer), then give back
+    // the room reserved for a voxel per point.
+    let mut centroids: Vec<Point3<f64>> = sums.into_iter().map(Point3::from).collect();
+    centroids.shrink_to_fit();
     Ok((centroids, owner))
 }
 
@@ -157,15 +160,20 @@ const PACKED_BITS: u32 = 21;
 /// Voxel indices below this in magnitude fit a packed key.
 const PACKED_HALF_RANGE: u64 = 1 << (PACKED_BITS - 1);
 
-/// Per-voxel coordinate sums and counts in the order the voxels are first met, and (when
-/// `owners`) each point's voxel, for the voxel key `key_of` gives each point; `None` as soon as
-/// it gives `None`.
-#[allow(clippy::type_complexity)]
+/// Per-voxel coordinate sums and point counts, in the order the voxels are first met. Two
+/// buffers rather than one of pairs: the sums then turn into the centroids in place.
+struct Grouped {
+    sums: Vec<Vector3<f64>>,
+    counts: Vec<usize>,
+}
+
+/// The [`Grouped`] sums of the voxels and (when `owners`) each point's voxel, for the voxel key
+/// `key_of` gives each point; `None` as soon as it gives `None`.
 fn group_by_key<K: std::hash::Hash + Eq + Clone>(
     points: &[Point3<f64>],
     owners: bool,
     key_of: impl Fn(&Point3<f64>) -> Result<Option<K>>,
-) -> Result<Option<(Vec<(Vector3<f64>, usize)>, Vec<usize>)>> {
+) -> Result<Option<(Grouped, Vec<usize>)>> {
     // Room for a voxel per point, as many as a sparse scan can have (the Hesai P64's 106k points
     // make 75k voxels): growing the map and the sums from half that made this 4x slower (6 vs
     // 1.5 ms), most of it reallocating. But not for more than 2^17 voxels: a 1M-point scan's
@@ -174,7 +182,8 @@ fn group_by_key<K: std::hash::Hash + Eq + Clone>(
     let capacity = points.len().min(MAX_VOXEL_CAPACITY);
     let mut index: rustc_hash::FxHashMap<K, usize> =
         rustc_hash::FxHashMap::with_capacity_and_hasher(capacity, Default::default());
-    let mut sums: Vec<(Vector3<f64>, usize)> = Vec::with_capacity(capacity);
+    let mut sums: Vec<Vector3<f64>> = Vec::with_capacity(capacity);
+    let mut counts: Vec<usize> = Vec::with_capacity(capacity);
     let mut owner = Vec::with_capacity(if owners { points.len() } else { 0 });
     // The voxel of the previous point: a scan's consecutive returns often share one (neighbours
     // along a ring at short range), and that skips the map.
@@ -189,21 +198,22 @@ fn group_by_key<K: std::hash::Hash + Eq + Clone>(
                 let next = sums.len();
                 let slot = *index.entry(key.clone()).or_insert(next);
                 if slot == next {
-                    sums.push((Vector3::zeros(), 0));
+                    sums.push(Vector3::zeros());
+                    counts.push(0);
                 }
                 last = Some((key, slot));
                 slot
             }
         };
-        if let Some(s) = sums.get_mut(slot) {
-            s.0 += p.coords;
-            s.1 += 1;
+        if let (Some(s), Some(n)) = (sums.get_mut(slot), counts.get_mut(slot)) {
+            *s += p.coords;
+            *n += 1;
         }
         if owners {
             owner.push(slot);
         }
     }
-    Ok(Some((sums, owner)))
+    Ok(Some((Grouped { sums, counts }, owner)))
 }
 
 /// The k-d tree of a [`SurfaceCloud`]: `f64` coordinates, `u32` point indices, 3-D, 32 points per
@@ -242,11 +252,14 @@ impl SurfaceCloud {
                 points.len()
             )));
         }
-        let coordinates: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        // The tree wants plain arrays: the points become them in place and back (same layout),
+        // rather than through a copy of the cloud.
+        let coordinates: Vec<[f64; 3]> = points.into_iter().map(|p| p.coords.into()).collect();
         let (tree, grid) = crate::join(
             || Tree::new_from_slice(&coordinates),
-            || NeighbourGrid::new(&points, GRID_CELL),
+            || NeighbourGrid::new(&coordinates, GRID_CELL),
         );
+        let points: Vec<Point3<f64>> = coordinates.into_iter().map(Point3::from).collect();
         let normals = (0..points.len()).map(|_| OnceLock::new()).collect();
         Ok(SurfaceCloud {
             points,
