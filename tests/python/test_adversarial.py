@@ -289,6 +289,9 @@ def test_no_wrong_answer(family: str, seed: int) -> None:
 #: Corner 100014 (planes): one cloud takes a pavement 17 cm high for the ground; the result, 15 cm
 #: off, puts 1.9 % of the points into free space, which starts the next-plane search since the
 #: trigger went from 3 to 1.5 %, and the pavement's swap solves it exactly.
+#: Corners 100049 and 100088 (auto): the corner method's exact result and a targetless one 34 and
+#: 42 cm off both pass the check with certificates under 0.1 apart; the corner result keeps the
+#: free space clear (0 and 0.3 %) where the targetless one puts 5.0 and 1.9 %, and stands.
 MUST_SOLVE = [
     ("poles", 117, "targetless"),
     ("corner", 5, "targetless"),
@@ -328,6 +331,8 @@ MUST_SOLVE = [
     ("corner", 52, "auto"),
     ("corner", 40193, "auto"),
     ("corner", 100014, "planes"),
+    ("corner", 100049, "auto"),
+    ("corner", 100088, "auto"),
 ]
 
 
@@ -528,6 +533,8 @@ def test_families_list_methods_they_can_use() -> None:
 #: targetless method, refused as out of range, found its best pose 7.1 m out (the truth).
 #: Room 100169 (planes): half a turn and 6 m off, its three planes put 4.4 % of the points into
 #: free space in an enclosed scene, over the 4 % bound (5 % until then).
+#: Poles 110063 (auto): the pole method's correct result puts 2.9 % of the points into free space,
+#: a targetless pose 94 cm off 0.6 %; only a corner-method result stands on clearer free space.
 REFUSED = [
     ("corner", 21188, "targetless", "ambiguous", "the corner's three planes are square"),
     ("repeated", 21027, "targetless", "ambiguous", "the reference repeats itself every"),
@@ -554,6 +561,7 @@ REFUSED = [
     ("corner", 24019, "planes", "ambiguous", "only one passes the check, but it overlaps"),
     ("corridor", 13001, "planes", "ambiguous", "two orderings fit the normals equally well"),
     ("corridor", 100169, "planes", "no_agreement", "the free space of a right pose is clear"),
+    ("poles", 110063, "auto", "inconsistent_methods", "certificates do not separate them"),
 ]
 
 
