@@ -97,8 +97,8 @@ def calibrate(
     their certificates do not clearly separate them it raises :class:`CalibrationError` of kind
     ``"inconsistent_methods"``, unless the corner method's result keeps the other sensor's free
     space clearly clearer than every result it disagrees with (it is returned). The result's
-    ``method`` names the method. Raises :class:`CalibrationError` (with ``kind``) listing each method's reason when
-    none succeeds, ``ValueError`` for malformed input or an unknown method.
+    ``method`` names the method. Raises :class:`CalibrationError` (with ``kind``) listing each
+    method's reason when none succeeds, ``ValueError`` for malformed input or an unknown method.
     """
     ref = _cloud(reference, "reference")
     tgt = _cloud(target, "target")
