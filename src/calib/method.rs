@@ -351,9 +351,9 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
 /// and kept it clear (0-0.3 % of the points) against a targetless result 10-42 cm off with
 /// 1.9-9.7 % (corners 50035, 60066, 80035, 100049, 100088); in the other five neither result
 /// kept it clearly clearer. Set 110000 added two such corners (110054, 110170: 1.2 and 3.1 %,
-/// about 20 cm off). Only the corner method's result, which three planes fix exactly: allowing
-/// any method's returned, on fresh pole scene 110063, a targetless pose 94 cm off (0.6 %) over
-/// the pole method's correct result (2.9 %).
+/// about 20 cm off). Only the corner method's result, which three planes fix exactly: letting
+/// any method's result stand this way returned, on fresh pole scene 110063, a targetless pose
+/// 94 cm off (0.6 %) over the pole method's correct result (2.9 %).
 fn clearly_clearest(
     results: &[Calibration],
     disagree: &impl Fn(usize, usize) -> bool,
