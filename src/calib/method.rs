@@ -295,38 +295,37 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     let mut pick = (0..scores.len())
         .find(|&i| scores[i] >= scores[top] - options.auto_tie || !disagree(i, top))
         .unwrap_or(top);
+    // The first result that disagrees with the pick while the certificates do not separate
+    // them. With one, `auto` refuses, unless the corner method's result keeps the free space
+    // clearly clearer than every result it disagrees with: then that result is the pick.
     let unseparated = (0..results.len())
-        .any(|i| disagree(pick, i) && scores[pick] - scores[i] < options.auto_margin);
-    // Every result the clear one disagrees with puts clearly more points into free space.
-    let clear = if unseparated {
-        clearly_clearest(&results, &disagree)
-    } else {
-        None
-    };
-    if let Some(c) = clear {
-        pick = c;
-    }
-    for (i, other) in results.iter().enumerate() {
-        let apart = Separation::new(&results[pick], other);
-        if clear.is_none() && apart.disagree() && scores[pick] - scores[i] < options.auto_margin {
-            return Err(Error::calibration(
-                FailureKind::InconsistentMethods,
-                format!(
-                    "the {} and {} methods both passed the check but disagree by {:.2} deg / \
-                     {:.1} cm (beyond their tolerance of {:.2} deg / {:.1} cm), and their \
-                     certificates do not separate them (scores {:.3} and {:.3}, need a margin of \
-                     {}): the scene fits two poses; calibrate with one method, or add structure",
-                    results[pick].method().name(),
-                    other.method().name(),
-                    apart.angle.to_degrees(),
-                    apart.distance * 100.0,
-                    apart.rotation_tolerance.to_degrees(),
-                    apart.translation_tolerance * 100.0,
-                    scores[pick],
-                    scores[i],
-                    options.auto_margin
-                ),
-            ));
+        .find(|&i| disagree(pick, i) && scores[pick] - scores[i] < options.auto_margin);
+    if let Some(i) = unseparated {
+        match clearly_clearest(&results, &disagree) {
+            Some(clear) => pick = clear,
+            None => {
+                let (picked, other) = (&results[pick], &results[i]);
+                let apart = Separation::new(picked, other);
+                return Err(Error::calibration(
+                    FailureKind::InconsistentMethods,
+                    format!(
+                        "the {} and {} methods both passed the check but disagree by {:.2} deg / \
+                         {:.1} cm (beyond their tolerance of {:.2} deg / {:.1} cm), and their \
+                         certificates do not separate them (scores {:.3} and {:.3}, need a \
+                         margin of {}): the scene fits two poses; calibrate with one method, or \
+                         add structure",
+                        picked.method().name(),
+                        other.method().name(),
+                        apart.angle.to_degrees(),
+                        apart.distance * 100.0,
+                        apart.rotation_tolerance.to_degrees(),
+                        apart.translation_tolerance * 100.0,
+                        scores[pick],
+                        scores[i],
+                        options.auto_margin
+                    ),
+                ));
+            }
         }
     }
     let chosen = results.swap_remove(pick);
@@ -339,7 +338,7 @@ fn auto(reference: Cloud<'_>, target: Cloud<'_>, options: &MethodOptions) -> Res
     }
     let distance = chosen.reference_from_target.translation.vector.norm();
     if targetless_out_of_range && distance > options.targetless.max_translation {
-        out_of_range_witness(&chosen, reference, target, options)?;
+        out_of_range_witness(&chosen, distance, reference, target, options)?;
     }
     Ok(chosen)
 }
@@ -362,27 +361,26 @@ fn clearly_clearest(
         if results[c].method() != Method::Planes {
             return false;
         }
-        let rivals: Vec<usize> = (0..results.len())
+        let free = results[c].check.free_share();
+        let mut rivals = (0..results.len())
             .filter(|&j| j != c && disagree(c, j))
-            .collect();
-        !rivals.is_empty()
-            && rivals
-                .iter()
-                .all(|&j| clearer(results[c].check.free_share(), results[j].check.free_share()))
+            .peekable();
+        rivals.peek().is_some() && rivals.all(|j| clearer(free, results[j].check.free_share()))
     })
 }
 
-/// `Err(InconsistentMethods)` when `chosen`, another method's result beyond the targetless
-/// method's `max_translation` while that method was refused as out of range, is not where the
-/// targetless method's best pose puts the target. That pose is computed again without the bound
-/// and never returned. The refusal says the clouds agree best beyond the bound, which backs a
-/// result out there only if the two are one pose: in a partial-overlap street (adversarial partial
-/// 80162) the corner method's pose, 17 m out and turned 90 degrees, passed its check (16 %
-/// overlap), while the targetless method's best lay 7.1 m out; where the corner method was right,
-/// 6.4-6.5 m out (partial 60135 and 80080), the targetless method's best was that pose. When the
-/// unbounded run fails as well, nothing speaks against `chosen`.
+/// `Err(InconsistentMethods)` when `chosen`, another method's result `distance` metres out,
+/// beyond the targetless method's `max_translation` while that method was refused as out of
+/// range, is not where the targetless method's best pose puts the target. That pose is computed
+/// again without the bound and never returned. The refusal says the clouds agree best beyond the
+/// bound, which backs a result out there only if the two are one pose: in a partial-overlap
+/// street (adversarial partial 80162) the corner method's pose, 17 m out and turned 90 degrees,
+/// passed its check (16 % overlap), while the targetless method's best lay 7.1 m out; where the
+/// corner method was right, 6.4-6.5 m out (partial 60135 and 80080), the targetless method's best
+/// was that pose. When the unbounded run fails as well, nothing speaks against `chosen`.
 fn out_of_range_witness(
     chosen: &Calibration,
+    distance: f64,
     reference: Cloud<'_>,
     target: Cloud<'_>,
     options: &MethodOptions,
@@ -407,7 +405,7 @@ fn out_of_range_witness(
              of {:.2} deg / {:.1} cm): calibrate with one method, or raise max_translation if the \
              sensors are that far apart",
             chosen.method().name(),
-            chosen.reference_from_target.translation.vector.norm(),
+            distance,
             options.targetless.max_translation,
             witness.reference_from_target.translation.vector.norm(),
             apart.angle.to_degrees(),
