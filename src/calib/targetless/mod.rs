@@ -600,7 +600,16 @@ fn best_supported(candidates: &[Candidate], options: &TargetlessOptions) -> Vec<
 /// (seeds 0-199, 40000-40039, 50000-50199 and 60000-60199 of each family; a corner turned 130
 /// degrees, a pole scene 92 cm along the ground) held 1.00 % and 1.14 % there, its 149 correct
 /// ones 1.61 % or more.
-pub(super) const SWEEP_FACTOR: f64 = 1.5;
+const SWEEP_FACTOR: f64 = 1.5;
+
+/// The floor `floor` raised by [`SWEEP_FACTOR`] for a pose from the ground `sweep`.
+pub(super) fn sweep_floor(floor: f64, sweep: bool) -> f64 {
+    if sweep {
+        SWEEP_FACTOR * floor
+    } else {
+        floor
+    }
+}
 
 /// `Err(Calibration)` when the best verified pose `top` brings nothing into agreement (or less
 /// than `min_agreement`, one and a half times that for a pose from the ground `sweep`), or lies
@@ -626,11 +635,7 @@ fn ensure_best_acceptable(
         ));
     }
     let distance = top.pose.translation.vector.norm();
-    let floor = if sweep {
-        SWEEP_FACTOR * options.min_agreement
-    } else {
-        options.min_agreement
-    };
+    let floor = sweep_floor(options.min_agreement, sweep);
     if distance <= options.max_translation {
         if top.agreement < floor {
             return Err(Error::calibration(

@@ -6,7 +6,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::options::TargetlessOptions;
 use super::segment::PlaneFeature;
-use super::SWEEP_FACTOR;
+use super::sweep_floor;
 use crate::error::{Error, FailureKind, Result};
 use crate::icp::{weakest_direction, weakest_directions, IcpResult};
 use crate::lm::LmReport;
@@ -24,8 +24,8 @@ pub(super) struct Observability {
 /// The observability of the final problem: the final ICP's information (`sum w n n^T` over its
 /// correspondences) when it ran, else the plane refinement's (`report`). `Err(Calibration)` with
 /// [`FailureKind::Unobservable`] naming the weak direction when its share is below
-/// `options.min_information_share` ([`SWEEP_FACTOR`] times that for the translation of a pose
-/// from the ground `sweep`).
+/// `options.min_information_share` (raised by [`sweep_floor`] for the translation of a pose from
+/// the ground `sweep`).
 pub(super) fn observability(
     matched: &[&PlaneFeature],
     icp: Option<&IcpResult>,
@@ -53,11 +53,7 @@ pub(super) fn observability(
         "the matched planes"
     };
     let fmt = |v: &Vector3<f64>| format!("[{:.2}, {:.2}, {:.2}]", v.x, v.y, v.z);
-    let translation_floor = if sweep {
-        SWEEP_FACTOR * options.min_information_share
-    } else {
-        options.min_information_share
-    };
+    let translation_floor = sweep_floor(options.min_information_share, sweep);
     if weakest_translation.1 < translation_floor {
         return Err(Error::calibration(
             FailureKind::Unobservable,
