@@ -6,9 +6,10 @@
 //! bound their rounding. The inlier count is a compile-time option: counting costs registers in
 //! the hot loop and the search needs only the cost.
 //!
-//! On x86-64 the kernel is also compiled for AVX2 and picked at run time. FMA is deliberately not
-//! enabled: every lane does the same operations in the same order as the baseline build, so
-//! results are bit-identical on machines with and without AVX2.
+//! On x86-64 the kernel is also compiled for AVX-512F and for AVX2, and the widest the CPU has is
+//! picked at run time. FMA is deliberately not enabled: every lane does the same operations in the
+//! same order as the baseline build, so results are bit-identical on machines with and without
+//! either.
 
 use super::consensus::{Score, GROUP};
 
@@ -35,6 +36,12 @@ pub fn score<M, F>(
     F: Fn(&M, f32, f32, f32) -> f32 + Copy,
 {
     #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU supports AVX-512F, checked just above.
+        unsafe { score_avx512(count_inliers, x, y, z, models, threshold, out, d2) };
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2, checked just above.
         unsafe { score_avx2(count_inliers, x, y, z, models, threshold, out, d2) };
@@ -52,6 +59,30 @@ pub fn score<M, F>(
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
 unsafe fn score_avx2<M, F>(
+    count_inliers: bool,
+    x: &[f32],
+    y: &[f32],
+    z: &[f32],
+    models: &[M],
+    threshold: f32,
+    out: &mut [Score],
+    d2: F,
+) where
+    M: Copy + Default,
+    F: Fn(&M, f32, f32, f32) -> f32 + Copy,
+{
+    if count_inliers {
+        score_impl::<M, F, true>(x, y, z, models, threshold, out, d2)
+    } else {
+        score_impl::<M, F, false>(x, y, z, models, threshold, out, d2)
+    }
+}
+
+/// [`score`] compiled for AVX-512F (see the module docs).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn score_avx512<M, F>(
     count_inliers: bool,
     x: &[f32],
     y: &[f32],
