@@ -55,6 +55,17 @@ pub(super) const RULED_OUT_TURN: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// well, so only 23152 is refused.
 const WEAK_ALIKE_SHARE: f64 = 0.02;
 
+/// An unverifiable half turn of the best pose that fits as well is a twin of it
+/// ([`Contest::symmetry_rival`]) when the best pose holds less than this many times the check's
+/// floor (`min_information_share`, 0.5 %) of its translation information along its weakest
+/// direction. A fresh room with a ceiling seen by two 16-beam units (adversarial corridor
+/// 130003, not surely solvable) came back turned 180 degrees and 4.9 m off, agreeing 85 % / 99 %
+/// with no point in free space and holding 0.53 %; its half turn, unverifiable at 0.25 %,
+/// agreed 93 % / 97 % with 1.0 % in free space at 68 % of its score. Correct results whose
+/// unverifiable half turns fit as well held more: a furnished room (corridor 110009) 1.54 %
+/// (refused at a bound of 2 %), two identical boxes (repeated 100 and 1) 5.1 % and 12 %.
+const UNVERIFIED_TWIN_FLOOR_FACTOR: f64 = 2.0;
+
 /// The two weak directions of [`WEAK_ALIKE_SHARE`] are about the same when within 20 degrees
 /// (the three half turns: within 5 degrees).
 const WEAK_ALIKE_COSINE: f64 = 0.94;
@@ -281,6 +292,12 @@ impl<'a> Contest<'a> {
     /// against the truth's 0.339 (60 % against 36 % overlap), with 94 % / 98 % agreement and no
     /// point in free space for both.
     ///
+    /// Such a twin that the check cannot verify (one direction held too weakly where it
+    /// overlaps), fitting as well and scoring at least [`CLEARER_CONTENDER_RATIO`] of the best
+    /// pose, is a twin all the same ([`Rival::UnverifiableHalfTurn`]) when the best pose itself is
+    /// held by a hair (see [`UNVERIFIED_TWIN_FLOOR_FACTOR`]): the check then tells neither pose
+    /// well.
+    ///
     /// Otherwise, turned and within range alike, a [`Rival::ClearerTurn`] when it passes the
     /// check and keeps the free space [`clearer`] than the best pose. The verification ranks by
     /// overlap, which a turned corner can enlarge: the best pose of corner 9066 (turned 120
@@ -307,6 +324,17 @@ impl<'a> Contest<'a> {
         let c = self.checks.pair()?.check(&v.pose)?;
         if self.indistinguishable(&c)? {
             return Ok(Some(Rival::HalfTurn));
+        }
+        let hair = UNVERIFIED_TWIN_FLOOR_FACTOR * self.checks.options().min_information_share;
+        let weakly_held = self
+            .best_check()?
+            .is_some_and(|b| b.weakest_translation.1 < hair);
+        if c.verdict == Verdict::Unverifiable
+            && weakly_held
+            && v.score >= CLEARER_CONTENDER_RATIO * self.best.score
+            && self.fits_as_well(&c)?
+        {
+            return Ok(Some(Rival::UnverifiableHalfTurn));
         }
         let free = c.free_share();
         Ok(
@@ -444,6 +472,10 @@ pub(super) enum Rival {
     /// The best pose turned a third of a turn about a diagonal of a square corner, fitting as
     /// well and not inconsistent, though perhaps unverifiable ([`Contest::square_twin`]).
     SquareTurn,
+    /// The best pose turned half a turn about a symmetry of the scene, fitting as well, scoring
+    /// at least half as much and unverifiable, against a best pose the check holds by a hair
+    /// ([`Contest::symmetry_rival`]).
+    UnverifiableHalfTurn,
 }
 
 /// What the search for a rival of the best pose found.
@@ -1083,6 +1115,17 @@ pub(super) fn ambiguity_message(
                 angle.to_degrees()
             );
         }
+        Some(Rival::UnverifiableHalfTurn) => {
+            return format!(
+                "ambiguous: the best pose turned about a symmetry of the scene ({:.1} deg and \
+                 {distance:.2} m away) agrees as closely where the clouds overlap and keeps the \
+                 free space as clear; the check cannot verify it, as the overlap there holds one \
+                 direction too weakly, and it cannot rule it out either (scores {second_score:.3} \
+                 and {best_score:.3}); a symmetric room or corridor seen from inside: add \
+                 structure both sensors see that breaks the symmetry",
+                angle.to_degrees()
+            );
+        }
         Some(Rival::SquareTurn) => {
             return format!(
                 "ambiguous: the corner's three planes are square, and the best pose turned a \
@@ -1183,6 +1226,14 @@ mod tests {
         let low = verified(Isometry3::identity(), 0.021);
         let noise = ambiguity_message(&low, &Rivalry::of(verified(turned, 0.0), Rival::Tie), 5.0);
         assert!(noise.contains("within the verification's noise"), "{noise}");
+        rivalry.rival = Some(Rival::UnverifiableHalfTurn);
+        let unverified = ambiguity_message(&best, &rivalry, 5.0);
+        assert!(
+            unverified.contains("180.0 deg and 6.02 m")
+                && unverified.contains("the check cannot verify it")
+                && unverified.contains("(scores 0.339 and 0.552)"),
+            "{unverified}"
+        );
         rivalry.rival = Some(Rival::Slide);
         let slide = ambiguity_message(&best, &rivalry, 5.0);
         assert!(
