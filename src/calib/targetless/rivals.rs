@@ -59,7 +59,7 @@ const WEAK_ALIKE_SHARE: f64 = 0.02;
 /// ([`Contest::symmetry_rival`]) when the best pose holds less than this many times the check's
 /// floor (`min_information_share`, 0.5 %) of its translation information along its weakest
 /// direction. A fresh room with a ceiling seen by two 16-beam units (adversarial corridor
-/// 130003, not surely solvable) came back turned 180 degrees and 4.9 m off, agreeing 85 % / 99 %
+/// 130003, not surely solvable) came back turned 180 degrees and 4.9 m off, agreeing 85 % / 98 %
 /// with no point in free space and holding 0.53 %; its half turn, unverifiable at 0.25 %,
 /// agreed 93 % / 97 % with 1.0 % in free space at 68 % of its score. Correct results whose
 /// unverifiable half turns fit as well held more: a furnished room (corridor 110009) 1.54 %
