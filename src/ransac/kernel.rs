@@ -35,87 +35,86 @@ pub fn score<M, F>(
     M: Copy + Default,
     F: Fn(&M, f32, f32, f32) -> f32 + Copy,
 {
+    let job = Job {
+        count_inliers,
+        x,
+        y,
+        z,
+        models,
+        threshold,
+    };
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx512f") {
         // SAFETY: the CPU supports AVX-512F, checked just above.
-        unsafe { score_avx512(count_inliers, x, y, z, models, threshold, out, d2) };
+        unsafe { score_avx512(&job, out, d2) };
         return;
     }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2, checked just above.
-        unsafe { score_avx2(count_inliers, x, y, z, models, threshold, out, d2) };
+        unsafe { score_avx2(&job, out, d2) };
         return;
     }
-    if count_inliers {
-        score_impl::<M, F, true>(x, y, z, models, threshold, out, d2)
-    } else {
-        score_impl::<M, F, false>(x, y, z, models, threshold, out, d2)
-    }
+    score_either(&job, out, d2)
 }
 
-/// [`score`] compiled for AVX2 (see the module docs).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn score_avx2<M, F>(
+/// What [`score`] scores: the cloud, the models and the threshold.
+struct Job<'a, M> {
     count_inliers: bool,
-    x: &[f32],
-    y: &[f32],
-    z: &[f32],
-    models: &[M],
+    x: &'a [f32],
+    y: &'a [f32],
+    z: &'a [f32],
+    models: &'a [M],
     threshold: f32,
-    out: &mut [Score],
-    d2: F,
-) where
+}
+
+/// A build of [`score`] with one x86-64 target feature enabled (see the module docs): `name`,
+/// compiled for `feature`; call it only where the CPU has that feature.
+macro_rules! score_with_feature {
+    ($name:ident, $feature:literal) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        unsafe fn $name<M, F>(job: &Job<'_, M>, out: &mut [Score], d2: F)
+        where
+            M: Copy + Default,
+            F: Fn(&M, f32, f32, f32) -> f32 + Copy,
+        {
+            score_either(job, out, d2)
+        }
+    };
+}
+
+score_with_feature!(score_avx512, "avx512f");
+score_with_feature!(score_avx2, "avx2");
+
+/// [`score_impl`] with or without the inlier count, inlined into each build of [`score`].
+#[inline(always)]
+fn score_either<M, F>(job: &Job<'_, M>, out: &mut [Score], d2: F)
+where
     M: Copy + Default,
     F: Fn(&M, f32, f32, f32) -> f32 + Copy,
 {
-    if count_inliers {
-        score_impl::<M, F, true>(x, y, z, models, threshold, out, d2)
+    if job.count_inliers {
+        score_impl::<M, F, true>(job, out, d2)
     } else {
-        score_impl::<M, F, false>(x, y, z, models, threshold, out, d2)
-    }
-}
-
-/// [`score`] compiled for AVX-512F (see the module docs).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn score_avx512<M, F>(
-    count_inliers: bool,
-    x: &[f32],
-    y: &[f32],
-    z: &[f32],
-    models: &[M],
-    threshold: f32,
-    out: &mut [Score],
-    d2: F,
-) where
-    M: Copy + Default,
-    F: Fn(&M, f32, f32, f32) -> f32 + Copy,
-{
-    if count_inliers {
-        score_impl::<M, F, true>(x, y, z, models, threshold, out, d2)
-    } else {
-        score_impl::<M, F, false>(x, y, z, models, threshold, out, d2)
+        score_impl::<M, F, false>(job, out, d2)
     }
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn score_impl<M, F, const COUNT: bool>(
-    x: &[f32],
-    y: &[f32],
-    z: &[f32],
-    models: &[M],
-    threshold: f32,
-    out: &mut [Score],
-    d2: F,
-) where
+fn score_impl<M, F, const COUNT: bool>(job: &Job<'_, M>, out: &mut [Score], d2: F)
+where
     M: Copy + Default,
     F: Fn(&M, f32, f32, f32) -> f32 + Copy,
 {
+    let Job {
+        x,
+        y,
+        z,
+        models,
+        threshold,
+        ..
+    } = *job;
     let count = models.len().min(GROUP).min(out.len());
     let mut group = [M::default(); GROUP];
     group[..count].copy_from_slice(&models[..count]);
