@@ -243,8 +243,11 @@ def calibrate_rig(
     reference but overlaps a calibrated target is reached through it. Raises
     :class:`CalibrationError` when some target cannot be connected to the reference, unless
     ``require_all=False``: then the others are returned and that target is listed in
-    ``unconnected`` (with its reasons in ``failures``). The method options go to every edge's
-    calibration as in :func:`calibrate`.
+    ``unconnected`` (with its reasons in ``failures``). Raises :class:`CalibrationError` of kind
+    ``"inconsistent_methods"`` when the kept edges contradict each other (an edge disagrees with
+    the refined rig by more than 1 degree or 10 cm: a cycle that does not close has a wrong edge,
+    and the rig cannot tell which). The method options go to every edge's calibration as in
+    :func:`calibrate`.
 
     Left None, ``method``, ``pairwise`` and ``require_all`` take the Rust ``RigOptions::default()``
     and ``max_bright_fraction`` that of ``PoleOptions::default()``: ``method='auto'``,

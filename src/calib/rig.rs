@@ -35,6 +35,16 @@ use crate::{Error, FailureKind, Result};
 /// the points of one onto the other (the units overlap).
 pub const MIN_PAIR_OVERLAP: f64 = 0.2;
 
+/// Largest disagreement (degrees) of an edge with the refined rig before [`calibrate_rig`] takes
+/// the edges to contradict each other. Around a cycle of correct edges the pose graph leaves each
+/// a few hundredths of a degree (the real road rig of `benches/targetless_accuracy.py` with its
+/// three edges: 0.05-0.07 degrees, 0.6-1.1 cm); one wrong edge in a cycle of three left the rig
+/// 38-47 degrees off when it was averaged in.
+pub const MAX_EDGE_ROTATION_RESIDUAL_DEG: f64 = 1.0;
+/// Largest disagreement (metres) of an edge with the refined rig; see
+/// [`MAX_EDGE_ROTATION_RESIDUAL_DEG`].
+pub const MAX_EDGE_TRANSLATION_RESIDUAL_M: f64 = 0.1;
+
 /// Name of the reference sensor in a [`RigCalibration`]; no target may use it.
 pub const REFERENCE: &str = "reference";
 
@@ -168,7 +178,11 @@ impl RigCalibration {
 /// [`edge_information`]. A target that fails against the reference but overlaps a placed target
 /// is reached through it. Errors: `InvalidInput` for no targets, a target named [`REFERENCE`],
 /// two targets of one name or bad [`RigOptions::pose_graph`]; `Calibration` naming every pair's
-/// reason when some target cannot be placed and `require_all` is set (or when none can).
+/// reason when some target cannot be placed and `require_all` is set (or when none can);
+/// `Calibration` of kind [`FailureKind::InconsistentMethods`] when the kept edges contradict each
+/// other: an edge disagrees with the refined rig by more than [`MAX_EDGE_ROTATION_RESIDUAL_DEG`]
+/// or [`MAX_EDGE_TRANSLATION_RESIDUAL_M`]. A cycle that does not close has a wrong edge, and
+/// which one the rig cannot tell: averaged in, it bends every pose of the cycle.
 pub fn calibrate_rig(
     reference: Cloud<'_>,
     targets: &[(&str, Cloud<'_>)],
@@ -437,8 +451,119 @@ fn refine(
             });
         }
     }
+    let residuals = edges.iter().map(|e| {
+        (
+            e.a.as_str(),
+            e.b.as_str(),
+            e.rotation_residual_deg,
+            e.translation_residual_m,
+        )
+    });
+    if let Some(message) = contradiction(residuals) {
+        return Err(Error::calibration(
+            FailureKind::InconsistentMethods,
+            message,
+        ));
+    }
     let transforms = (1..poses.len())
         .filter_map(|i| refined_of(i).map(|p| (names[i].to_string(), p)))
         .collect();
     Ok((edges, transforms, solution.report))
+}
+
+/// Why the rig's edges contradict each other, from each edge's `(a, b, rotation residual in
+/// degrees, translation residual in metres)` against the refined rig: `None` when every residual
+/// is within [`MAX_EDGE_ROTATION_RESIDUAL_DEG`] and [`MAX_EDGE_TRANSLATION_RESIDUAL_M`].
+fn contradiction<'e>(
+    residuals: impl Iterator<Item = (&'e str, &'e str, f64, f64)>,
+) -> Option<String> {
+    let all: Vec<(&str, &str, f64, f64)> = residuals.collect();
+    let beyond = |&&(_, _, r, t): &&(&str, &str, f64, f64)| {
+        r > MAX_EDGE_ROTATION_RESIDUAL_DEG || t > MAX_EDGE_TRANSLATION_RESIDUAL_M
+    };
+    all.iter().find(beyond)?;
+    let listed: Vec<String> = all
+        .iter()
+        .map(|(a, b, r, t)| format!("{a}-{b} {r:.2} deg / {:.1} cm", t * 100.0))
+        .collect();
+    Some(format!(
+        "the pairwise calibrations contradict each other: around a cycle of the rig the edges \
+         disagree with the best common poses by {} (tolerance {MAX_EDGE_ROTATION_RESIDUAL_DEG} \
+         deg / {:.0} cm); at least one edge is wrong and the rig cannot tell which: check each \
+         pair (`lidarcal check`), or calibrate without the target pairs (pairwise = false)",
+        listed.join(", "),
+        MAX_EDGE_TRANSLATION_RESIDUAL_M * 100.0
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pose_graph::{refine_pose_graph, PoseGraphEdge, PoseGraphOptions};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    /// The residuals the rig judges for three sensors whose target pair `1-2` is measured
+    /// `turn_deg` degrees off about the vertical.
+    fn cycle_residuals(turn_deg: f64) -> Vec<(String, String, f64, f64)> {
+        let pose = |x: f64, y: f64, yaw_deg: f64| {
+            Isometry3::from_parts(
+                Translation3::new(x, y, 0.0),
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw_deg.to_radians()),
+            )
+        };
+        let truth = [
+            pose(0.0, 0.0, 0.0),
+            pose(0.0, 0.6, 90.0),
+            pose(0.0, -0.6, -90.0),
+        ];
+        let off = pose(0.0, 0.0, turn_deg);
+        let edge = |a: usize, b: usize, wrong: bool| {
+            let measured = truth[a].inverse() * truth[b];
+            PoseGraphEdge {
+                a,
+                b,
+                a_from_b: if wrong { off * measured } else { measured },
+                information: default_information(),
+            }
+        };
+        let edges = [edge(0, 1, false), edge(0, 2, false), edge(1, 2, true)];
+        let start = [truth[0], truth[1], truth[0] * edges[1].a_from_b];
+        let solved = refine_pose_graph(&start, &edges, &PoseGraphOptions::default()).unwrap();
+        edges
+            .iter()
+            .map(|e| {
+                let err = edge_error(&e.a_from_b, &solved.poses[e.a], &solved.poses[e.b]);
+                (
+                    e.a.to_string(),
+                    e.b.to_string(),
+                    err.fixed_rows::<3>(3).norm().to_degrees(),
+                    err.fixed_rows::<3>(0).norm(),
+                )
+            })
+            .collect()
+    }
+
+    fn judged(residuals: &[(String, String, f64, f64)]) -> Option<String> {
+        contradiction(
+            residuals
+                .iter()
+                .map(|(a, b, r, t)| (a.as_str(), b.as_str(), *r, *t)),
+        )
+    }
+
+    #[test]
+    fn a_cycle_that_closes_is_kept_and_one_that_does_not_is_refused() {
+        // Edges off by a tenth of a degree between them close well within the tolerance.
+        let closes = cycle_residuals(0.1);
+        assert!(judged(&closes).is_none(), "{closes:?}");
+        // One target pair measured 40 degrees off: the graph spreads it around the cycle, every
+        // edge far beyond the tolerance, and the rig says so.
+        let open = cycle_residuals(40.0);
+        let message = judged(&open).expect("a cycle 40 degrees open");
+        assert!(open.iter().all(|(_, _, r, _)| *r > 5.0), "{open:?}");
+        assert!(
+            message.contains("contradict each other") && message.contains("1-2"),
+            "{message}"
+        );
+    }
 }
