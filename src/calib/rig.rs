@@ -39,7 +39,7 @@ pub const MIN_PAIR_OVERLAP: f64 = 0.2;
 /// the edges to contradict each other. Around a cycle of correct edges the pose graph leaves each
 /// a few hundredths of a degree (the real road rig of `benches/targetless_accuracy.py` with its
 /// three edges: 0.05-0.07 degrees, 0.6-1.1 cm); one wrong edge in a cycle of three left the rig
-/// 38-47 degrees off when it was averaged in.
+/// 37-47 degrees off when it was averaged in.
 pub const MAX_EDGE_ROTATION_RESIDUAL_DEG: f64 = 1.0;
 /// Largest disagreement (metres) of an edge with the refined rig; see
 /// [`MAX_EDGE_ROTATION_RESIDUAL_DEG`].
