@@ -438,15 +438,16 @@ fn refine(
     let mut edges = Vec::with_capacity(measured.len());
     for ((a, b, c), g) in measured.into_iter().zip(&graph) {
         if let (Some(pa), Some(pb)) = (refined_of(a), refined_of(b)) {
-            let err = edge_error(&c.reference_from_target, &pa, &pb);
+            let (rotation_residual_deg, translation_residual_m) =
+                residual(&c.reference_from_target, &pa, &pb);
             edges.push(RigEdge {
                 a: names[a].to_string(),
                 b: names[b].to_string(),
                 method: c.method(),
                 a_from_b: c.reference_from_target,
                 information: g.information,
-                rotation_residual_deg: err.fixed_rows::<3>(3).norm().to_degrees(),
-                translation_residual_m: err.fixed_rows::<3>(0).norm(),
+                rotation_residual_deg,
+                translation_residual_m,
                 result: c,
             });
         }
@@ -469,6 +470,20 @@ fn refine(
         .filter_map(|i| refined_of(i).map(|p| (names[i].to_string(), p)))
         .collect();
     Ok((edges, transforms, solution.report))
+}
+
+/// The disagreement of edge `a_from_b` with the rig's poses of `a` and `b`: rotation (degrees)
+/// and translation (metres).
+fn residual(
+    a_from_b: &Isometry3<f64>,
+    reference_from_a: &Isometry3<f64>,
+    reference_from_b: &Isometry3<f64>,
+) -> (f64, f64) {
+    let err = edge_error(a_from_b, reference_from_a, reference_from_b);
+    (
+        err.fixed_rows::<3>(3).norm().to_degrees(),
+        err.fixed_rows::<3>(0).norm(),
+    )
 }
 
 /// Why the rig's edges contradict each other, from each edge's `(a, b, rotation residual in
@@ -532,13 +547,8 @@ mod tests {
         edges
             .iter()
             .map(|e| {
-                let err = edge_error(&e.a_from_b, &solved.poses[e.a], &solved.poses[e.b]);
-                (
-                    e.a.to_string(),
-                    e.b.to_string(),
-                    err.fixed_rows::<3>(3).norm().to_degrees(),
-                    err.fixed_rows::<3>(0).norm(),
-                )
+                let (r, t) = residual(&e.a_from_b, &solved.poses[e.a], &solved.poses[e.b]);
+                (e.a.to_string(), e.b.to_string(), r, t)
             })
             .collect()
     }
