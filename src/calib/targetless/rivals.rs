@@ -11,7 +11,9 @@ use super::hypotheses::{
     in_range, same_pose, slide_peaks, SlideField, CLEARER_SLIDE_PEAKS, SLIDE_PEAKS,
 };
 use super::segment::{PlaneFeature, Prepared};
-use super::symmetry::{half_turns, third_turns, MAX_CORNER_COSINE, SQUARE_CORNER_COSINE};
+use super::symmetry::{
+    half_turns, swap_turns, third_turns, MAX_CORNER_COSINE, SQUARE_CORNER_COSINE,
+};
 use super::verify::{
     score_variance, Verified, Verifier, AMBIGUITY_RATIO, CHALLENGER_AMBIGUITY_RATIO,
     DISTINCT_ANGLE, DISTINCT_DISTANCE, MAX_POLISHED,
@@ -763,8 +765,8 @@ fn agreement_gain(report: &CheckReport, c: &CheckReport) -> f64 {
 /// The scene's own symmetries (the [`half_turns`] of the reference's planes, and the
 /// [`third_turns`] of a corner within 20 degrees of square when the best pose passes the check
 /// but puts more than [`SLID_FREE_SPACE_MIN`] of the points into free space, else of a corner
-/// within 5 degrees of square, judged by [`Contest::square_twin`]) applied to the best pose, each
-/// settled by ICP: the first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`],
+/// within 5 degrees of square, judged by [`Contest::square_twin`], and under the same suspicion
+/// the [`swap_turns`] of two of its planes) applied to the best pose, each settled by ICP: the first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`],
 /// [`Rival::SquareTurn`]) or keeps the
 /// free space clearer ([`Rival::ClearerTurn`]). The hypotheses may never reach it: when the two
 /// sensors' fields of view differ the truth can rank below its own mirror image.
@@ -775,15 +777,23 @@ pub(super) fn half_turn_rival(
     points: &[Point3<f64>],
 ) -> Option<(Verified, Rival)> {
     let best = contest.best.pose;
-    // Third turns against a best pose with points in free space, as slides: from a best pose
-    // with none (correct, corner 7088, walls 98.9 degrees apart), a third turn settled half a
-    // turn away as a rival the verification ranked within 75 % of it. Against any best pose when
-    // the corner is square within 5 degrees, but then only a turn that fits as well counts
-    // (`square_twin`).
-    let (thirds, square) = match contest.best_free_suspect() {
-        Ok(Some(_)) => (third_turns(features, MAX_CORNER_COSINE), false),
-        Ok(None) => (third_turns(features, SQUARE_CORNER_COSINE), true),
-        Err(_) => (Vec::new(), false),
+    // Third turns (and swaps of two planes) against a best pose with points in free space, as
+    // slides: from a best pose with none (correct, corner 7088, walls 98.9 degrees apart), a
+    // third turn settled half a turn away as a rival the verification ranked within 75 % of it.
+    // Against any best pose when the corner is square within 5 degrees, but then only a turn
+    // that fits as well counts (`square_twin`).
+    let (thirds, square, swaps) = match contest.best_free_suspect() {
+        Ok(Some(_)) => (
+            third_turns(features, MAX_CORNER_COSINE),
+            false,
+            swap_turns(features, points),
+        ),
+        Ok(None) => (
+            third_turns(features, SQUARE_CORNER_COSINE),
+            true,
+            Vec::new(),
+        ),
+        Err(_) => (Vec::new(), false, Vec::new()),
     };
     // Each turn with whether `square_twin` judges it, settled side by side (each settling is
     // independent of the others; they are judged in order below).
@@ -791,6 +801,7 @@ pub(super) fn half_turn_rival(
         .into_iter()
         .map(|turn| (false, turn))
         .chain(thirds.into_iter().map(|turn| (square, turn)))
+        .chain(swaps.into_iter().map(|turn| (false, turn)))
         .collect();
     let settled = crate::par_map(&turns, |(by_square, turn)| {
         verifier.settle(&(turn * best)).map(|v| (*by_square, v))

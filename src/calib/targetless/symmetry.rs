@@ -102,6 +102,50 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
         .collect()
 }
 
+/// Half turns that swap two of the largest reference planes of distinct directions
+/// ([`largest_of_directions`], [`SYMMETRY_PLANES`] of them): about each bisector of their normals
+/// (the sum and the difference), through the point of the line the two planes share nearest to
+/// the centroid of the reference points. A floor and a wall turned onto each other are the same
+/// dihedral, and a unit on its side sees either as a fan of scan lines: a fresh furnished room of
+/// the adversarial suite (corridor 180157, a 16-beam target on its side) came back turned 180
+/// degrees about the bisector of the floor's and a wall's normals, 1.6 m off, overlapping 79 %
+/// against the truth's 64 % with 1.9 % of the points in free space against none.
+pub(super) fn swap_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> Vec<Isometry3<f64>> {
+    let chosen = largest_of_directions(features, SYMMETRY_PLANES);
+    let centroid = points
+        .iter()
+        .fold(Vector3::zeros(), |sum, p| sum + p.coords)
+        / points.len().max(1) as f64;
+    let mut turns = Vec::new();
+    for (i, a) in chosen.iter().enumerate() {
+        for b in chosen.iter().skip(i + 1) {
+            let (na, nb) = (a.plane.normal.into_inner(), b.plane.normal.into_inner());
+            let line = na.cross(&nb);
+            if line.norm() < MIN_AXIS_NORM {
+                continue;
+            }
+            // The plane through the centroid across the shared line meets it there.
+            let Ok(across) = Plane::new(line, -line.dot(&centroid)) else {
+                continue;
+            };
+            let Some(at) = Plane::common_point(&[a.plane, b.plane, across]) else {
+                continue;
+            };
+            for axis in [na + nb, na - nb] {
+                let rotation = UnitQuaternion::from_axis_angle(
+                    &Unit::new_normalize(axis),
+                    std::f64::consts::PI,
+                );
+                turns.push(Isometry3::from_parts(
+                    Translation3::from(at.coords - rotation * at.coords),
+                    rotation,
+                ));
+            }
+        }
+    }
+    turns
+}
+
 /// Turns of a third (120 degrees either way) about the four diagonals of a square corner, through
 /// the point where its three planes meet, when the largest reference planes of three directions
 /// (each more than 10 degrees from the others) make one (no two normals further than `max_cosine`
@@ -231,6 +275,42 @@ mod tests {
             assert!((turn * centre - centre).norm() < 1e-9);
             assert!((turn * turn).translation.vector.norm() < 1e-9);
         }
+    }
+
+    #[test]
+    fn swap_turns_map_each_pair_of_planes_onto_each_other() {
+        let feature = |normal: Vector3<f64>, offset: f64| PlaneFeature {
+            plane: Plane::new(normal, offset).unwrap(),
+            voxels: Vec::new(),
+            centroid: Point3::origin(),
+            extent: [1.0, 1.0],
+        };
+        // A floor at z = -1.5, a wall at x = 4 and a wall 80 degrees from it through (4, 6, 0),
+        // and a ceiling parallel to the floor (passed over: one direction).
+        let at = Vector3::new(4.0, 6.0, 0.0);
+        let skew = Vector3::new(80f64.to_radians().cos(), 80f64.to_radians().sin(), 0.0);
+        let features = [
+            feature(Vector3::z(), 1.5),
+            feature(Vector3::z(), -2.5),
+            feature(Vector3::x(), -4.0),
+            feature(skew, -skew.dot(&at)),
+        ];
+        let points = [Point3::new(1.0, 2.0, 0.0), Point3::new(3.0, 0.0, 2.0)];
+        let turns = swap_turns(&features, &points);
+        // Three pairs of directions, two bisectors each.
+        assert_eq!(turns.len(), 6);
+        let planes = [features[0].plane, features[2].plane, features[3].plane];
+        let pairs = [(0, 1), (0, 1), (0, 2), (0, 2), (1, 2), (1, 2)];
+        for (turn, (i, j)) in turns.iter().zip(pairs) {
+            assert!((turn.rotation.angle() - std::f64::consts::PI).abs() < 1e-9);
+            // A point of plane i lands on plane j, and the reverse.
+            for (a, b) in [(planes[i], planes[j]), (planes[j], planes[i])] {
+                let on_a = Point3::from(-a.offset * a.normal.into_inner());
+                assert!(b.signed_distance(&(turn * on_a)).abs() < 1e-9);
+            }
+        }
+        // Parallel planes only: nothing to swap.
+        assert!(swap_turns(&features[..2], &points).is_empty());
     }
 
     #[test]
