@@ -79,10 +79,7 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
     for a in shared_lines(&normals) {
         add_axis(&mut axes, a);
     }
-    let centroid = points
-        .iter()
-        .fold(Vector3::zeros(), |sum, p| sum + p.coords)
-        / points.len().max(1) as f64;
+    let centroid = centroid(points);
     let mid = middle(points, &directions, centroid);
     let mut centres = vec![centroid];
     if (mid - centroid).norm() >= DISTINCT_DISTANCE {
@@ -102,6 +99,14 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
         .collect()
 }
 
+/// The centroid of `points` (the origin for none).
+fn centroid(points: &[Point3<f64>]) -> Vector3<f64> {
+    points
+        .iter()
+        .fold(Vector3::zeros(), |sum, p| sum + p.coords)
+        / points.len().max(1) as f64
+}
+
 /// Half turns that swap two of the largest reference planes of distinct directions
 /// ([`largest_of_directions`], [`SYMMETRY_PLANES`] of them): about each bisector of their normals
 /// (the sum and the difference), through the point of the line the two planes share nearest to
@@ -112,10 +117,7 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
 /// against the truth's 64 % with 1.9 % of the points in free space against none.
 pub(super) fn swap_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> Vec<Isometry3<f64>> {
     let chosen = largest_of_directions(features, SYMMETRY_PLANES);
-    let centroid = points
-        .iter()
-        .fold(Vector3::zeros(), |sum, p| sum + p.coords)
-        / points.len().max(1) as f64;
+    let centroid = centroid(points);
     let mut turns = Vec::new();
     for (i, a) in chosen.iter().enumerate() {
         for b in chosen.iter().skip(i + 1) {
