@@ -255,18 +255,26 @@ mod tests {
         assert_eq!(middle(&[], &[Vector3::x()], centroid), centroid);
     }
 
+    /// A plane feature of unit extent with this normal and offset.
+    fn feature(normal: Vector3<f64>, offset: f64) -> PlaneFeature {
+        PlaneFeature {
+            plane: Plane::new(normal, offset).unwrap(),
+            voxels: Vec::new(),
+            centroid: Point3::origin(),
+            extent: [1.0, 1.0],
+        }
+    }
+
     #[test]
     fn half_turns_are_the_box_symmetries_about_the_centroid() {
         // A floor and two walls 60 degrees apart: three normals and three shared lines, of which
         // the floor's normal and the walls' shared line (vertical) are one axis.
-        let feature = |normal: Vector3<f64>| PlaneFeature {
-            plane: Plane::new(normal, 1.0).unwrap(),
-            voxels: Vec::new(),
-            centroid: Point3::origin(),
-            extent: [1.0, 1.0],
-        };
         let wall = Vector3::new(60f64.to_radians().cos(), 60f64.to_radians().sin(), 0.0);
-        let features = [feature(Vector3::z()), feature(Vector3::x()), feature(wall)];
+        let features = [
+            feature(Vector3::z(), 1.0),
+            feature(Vector3::x(), 1.0),
+            feature(wall, 1.0),
+        ];
         assert_eq!(shared_lines(&largest_normals(&features)).len(), 3);
         let points = [Point3::new(1.0, 2.0, 0.0), Point3::new(3.0, 0.0, 2.0)];
         let turns = half_turns(&features, &points);
@@ -281,12 +289,6 @@ mod tests {
 
     #[test]
     fn swap_turns_map_each_pair_of_planes_onto_each_other() {
-        let feature = |normal: Vector3<f64>, offset: f64| PlaneFeature {
-            plane: Plane::new(normal, offset).unwrap(),
-            voxels: Vec::new(),
-            centroid: Point3::origin(),
-            extent: [1.0, 1.0],
-        };
         // A floor at z = -1.5, a wall at x = 4 and a wall 80 degrees from it through (4, 6, 0),
         // and a ceiling parallel to the floor (passed over: one direction).
         let at = Vector3::new(4.0, 6.0, 0.0);
@@ -317,12 +319,6 @@ mod tests {
 
     #[test]
     fn third_turns_permute_a_square_corners_planes() {
-        let feature = |normal: Vector3<f64>, offset: f64| PlaneFeature {
-            plane: Plane::new(normal, offset).unwrap(),
-            voxels: Vec::new(),
-            centroid: Point3::origin(),
-            extent: [1.0, 1.0],
-        };
         // A corner at (2, -1, 3), its planes slightly off square (88 degrees between two walls).
         let corner = Point3::new(2.0, -1.0, 3.0);
         let wall = Vector3::new(88f64.to_radians().cos(), 88f64.to_radians().sin(), 0.0);
