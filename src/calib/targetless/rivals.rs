@@ -766,9 +766,9 @@ fn agreement_gain(report: &CheckReport, c: &CheckReport) -> f64 {
 /// [`third_turns`] of a corner within 20 degrees of square when the best pose passes the check
 /// but puts more than [`SLID_FREE_SPACE_MIN`] of the points into free space, else of a corner
 /// within 5 degrees of square, judged by [`Contest::square_twin`], and under the same suspicion
-/// the [`swap_turns`] of two of its planes) applied to the best pose, each settled by ICP: the first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`],
-/// [`Rival::SquareTurn`]) or keeps the
-/// free space clearer ([`Rival::ClearerTurn`]). The hypotheses may never reach it: when the two
+/// the [`swap_turns`] of two of its planes) applied to the best pose, each settled by ICP: the
+/// first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`], [`Rival::SquareTurn`])
+/// or keeps the free space clearer ([`Rival::ClearerTurn`]). The hypotheses may never reach it: when the two
 /// sensors' fields of view differ the truth can rank below its own mirror image.
 pub(super) fn half_turn_rival(
     contest: &Contest<'_>,
