@@ -768,8 +768,8 @@ fn agreement_gain(report: &CheckReport, c: &CheckReport) -> f64 {
 /// within 5 degrees of square, judged by [`Contest::square_twin`], and under the same suspicion
 /// the [`swap_turns`] of two of its planes) applied to the best pose, each settled by ICP: the
 /// first that is a rival ([`Rival::Tie`]), a twin ([`Rival::HalfTurn`], [`Rival::SquareTurn`])
-/// or keeps the free space clearer ([`Rival::ClearerTurn`]). The hypotheses may never reach it: when the two
-/// sensors' fields of view differ the truth can rank below its own mirror image.
+/// or keeps the free space clearer ([`Rival::ClearerTurn`]). The hypotheses may never reach it:
+/// when the two sensors' fields of view differ the truth can rank below its own mirror image.
 pub(super) fn half_turn_rival(
     contest: &Contest<'_>,
     verifier: &Verifier<'_>,

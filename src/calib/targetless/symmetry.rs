@@ -89,14 +89,16 @@ pub(super) fn half_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
         .iter()
         .flat_map(|centre| {
             axes.iter().map(move |axis| {
-                let rotation = UnitQuaternion::from_axis_angle(
-                    &nalgebra::Unit::new_unchecked(*axis),
-                    std::f64::consts::PI,
-                );
-                Isometry3::from_parts(Translation3::from(centre - rotation * centre), rotation)
+                turn_about(&Unit::new_unchecked(*axis), std::f64::consts::PI, centre)
             })
         })
         .collect()
+}
+
+/// The turn by `angle` (radians) about the line through `through` along `axis`.
+fn turn_about(axis: &Unit<Vector3<f64>>, angle: f64, through: &Vector3<f64>) -> Isometry3<f64> {
+    let rotation = UnitQuaternion::from_axis_angle(axis, angle);
+    Isometry3::from_parts(Translation3::from(through - rotation * through), rotation)
 }
 
 /// The centroid of `points` (the origin for none).
@@ -134,13 +136,10 @@ pub(super) fn swap_turns(features: &[PlaneFeature], points: &[Point3<f64>]) -> V
                 continue;
             };
             for axis in [na + nb, na - nb] {
-                let rotation = UnitQuaternion::from_axis_angle(
+                turns.push(turn_about(
                     &Unit::new_normalize(axis),
                     std::f64::consts::PI,
-                );
-                turns.push(Isometry3::from_parts(
-                    Translation3::from(at.coords - rotation * at.coords),
-                    rotation,
+                    &at.coords,
                 ));
             }
         }
@@ -178,11 +177,7 @@ pub(super) fn third_turns(features: &[PlaneFeature], max_cosine: f64) -> Vec<Iso
     for (sb, sc) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
         let axis = Unit::new_normalize(a + b * sb + c * sc);
         for angle in [2.0, -2.0].map(|k| k * std::f64::consts::FRAC_PI_3) {
-            let rotation = UnitQuaternion::from_axis_angle(&axis, angle);
-            turns.push(Isometry3::from_parts(
-                Translation3::from(corner - rotation * corner),
-                rotation,
-            ));
+            turns.push(turn_about(&axis, angle, &corner));
         }
     }
     turns
