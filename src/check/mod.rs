@@ -79,6 +79,7 @@ mod verdict;
 
 use realign::{correction_excess, Correction, Detectable};
 use side::Side;
+pub(crate) use side::Voxels;
 use verdict::{verdict, Findings};
 
 pub(crate) use report::{clearer, CLEARER_FREE_MIN, MAX_HELD_CORRECTION};
@@ -314,6 +315,8 @@ pub(crate) struct LazyCheck<'a> {
     reference: &'a [Point3<f64>],
     target: &'a [Point3<f64>],
     options: &'a CheckOptions,
+    /// Each cloud's voxels, when the method has them already.
+    voxels: [Voxels<'a>; 2],
     pair: std::cell::OnceCell<PreparedPair>,
 }
 
@@ -327,8 +330,17 @@ impl<'a> LazyCheck<'a> {
             reference,
             target,
             options,
+            voxels: [Voxels::Raw, Voxels::Raw],
             pair: std::cell::OnceCell::new(),
         }
+    }
+
+    /// The check of a method that has downsampled the clouds as the check would (voxels of
+    /// [`CheckOptions::voxel_size`] by [`voxel_downsample`](crate::icp::voxel_downsample)):
+    /// its preparation starts from them (`[reference, target]`).
+    pub(crate) fn with_voxels(mut self, voxels: [Voxels<'a>; 2]) -> Self {
+        self.voxels = voxels;
+        self
     }
 
     /// The options the pair is checked under.
@@ -339,7 +351,12 @@ impl<'a> LazyCheck<'a> {
     /// The prepared pair (prepared on the first call).
     pub(crate) fn pair(&self) -> Result<&PreparedPair> {
         crate::get_or_try_init(&self.pair, || {
-            PreparedPair::new(self.reference, self.target, self.options)
+            PreparedPair::from_voxels(
+                self.reference,
+                self.target,
+                self.voxels.clone(),
+                self.options,
+            )
         })
     }
 }
@@ -372,13 +389,27 @@ impl PreparedPair {
         target: &[Point3<f64>],
         options: &CheckOptions,
     ) -> Result<Self> {
+        Self::from_voxels(reference, target, [Voxels::Raw, Voxels::Raw], options)
+    }
+
+    /// [`PreparedPair::new`] from each cloud's voxels where a method has them ([`Voxels`]).
+    pub(crate) fn from_voxels(
+        reference: &[Point3<f64>],
+        target: &[Point3<f64>],
+        voxels: [Voxels<'_>; 2],
+        options: &CheckOptions,
+    ) -> Result<Self> {
         options.validate()?;
         // Each cloud is validated on its side; the errors keep their order (the reference's
         // points, the target's, then the reference's side, the target's).
-        let side = |what: &str, points: &[Point3<f64>]| {
-            ensure_points(what, points).map(|()| Side::new(points, options))
+        let side = |what: &str, points: &[Point3<f64>], voxels: Voxels<'_>| {
+            ensure_points(what, points).map(|()| Side::new(points, voxels, options))
         };
-        let (r, g) = crate::join(|| side("reference", reference), || side("target", target));
+        let [rv, gv] = voxels;
+        let (r, g) = crate::join(
+            || side("reference", reference, rv),
+            || side("target", target, gv),
+        );
         let (r, g) = (r?, g?);
         let (r, g) = (r?, g?);
         // The noise scale comes from each cloud alone (how thick its surfaces are), never from
@@ -549,6 +580,7 @@ impl PreparedPair {
 #[cfg(all(test, feature = "sim"))]
 mod tests {
     use super::*;
+    use crate::icp::SurfaceCloud;
     use crate::sim::scenes::{street_scene, StreetOptions};
     use nalgebra::Translation3;
 
@@ -590,5 +622,30 @@ mod tests {
             assert_eq!(pair.check(&pose).unwrap(), fresh.check(&pose).unwrap());
         }
         assert!(pair.checked.lock().unwrap().len() <= CHECKS_KEPT);
+    }
+
+    #[test]
+    fn a_pair_prepared_from_a_methods_voxels_checks_as_a_fresh_one() {
+        let scene = street_scene(&StreetOptions::default()).unwrap();
+        let (reference, target) = (scene.reference.positions(), scene.target.positions());
+        let options = CheckOptions::default();
+        let (ref_voxels, _) = crate::icp::voxel_downsample(&reference, options.voxel_size).unwrap();
+        let (tgt_voxels, _) = crate::icp::voxel_downsample(&target, options.voxel_size).unwrap();
+        let surface = std::sync::Arc::new(SurfaceCloud::new(ref_voxels).unwrap());
+        // A normal taken before the check (by the method's own ICP) changes nothing.
+        surface.normal(0);
+        let shared = PreparedPair::from_voxels(
+            &reference,
+            &target,
+            [Voxels::Surface(surface), Voxels::Centroids(&tgt_voxels)],
+            &options,
+        )
+        .unwrap();
+        let fresh = PreparedPair::new(&reference, &target, &options).unwrap();
+        assert_eq!(shared.noise, fresh.noise);
+        let truth = scene.reference_from_target;
+        for pose in [truth, Translation3::new(0.3, -0.2, 0.1) * truth] {
+            assert_eq!(shared.check(&pose).unwrap(), fresh.check(&pose).unwrap());
+        }
     }
 }

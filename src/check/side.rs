@@ -1,5 +1,7 @@
 //! One cloud of a [`PreparedPair`](super::PreparedPair): downsampled, indexed and binned.
 
+use std::sync::Arc;
+
 use nalgebra::Point3;
 
 use super::{CheckOptions, THICKNESS_SAMPLES};
@@ -7,10 +9,24 @@ use crate::error::Result;
 use crate::icp::{voxel_centroids, SurfaceCloud};
 use crate::visibility::RangeImage;
 
+/// What one side of a check starts from besides the cloud itself: nothing (the cloud is
+/// downsampled into voxels of [`CheckOptions::voxel_size`]), or a method's own voxels of that
+/// size, made by the same downsampling ([`voxel_downsample`](crate::icp::voxel_downsample)),
+/// as points or already indexed. The check is the same either way; it skips the work done.
+#[derive(Debug, Clone)]
+pub(crate) enum Voxels<'a> {
+    /// Downsample the cloud.
+    Raw,
+    /// These are the cloud's voxels.
+    Centroids(&'a [Point3<f64>]),
+    /// This indexes the cloud's voxels.
+    Surface(Arc<SurfaceCloud>),
+}
+
 /// One cloud, downsampled and indexed, with its sensor's range image.
 #[derive(Debug)]
 pub(super) struct Side {
-    pub(super) surface: SurfaceCloud,
+    pub(super) surface: Arc<SurfaceCloud>,
     pub(super) samples: Vec<Point3<f64>>,
     pub(super) image: RangeImage,
 }
@@ -32,13 +48,25 @@ impl Side {
         median(&mut values)
     }
 
-    pub(super) fn new(points: &[Point3<f64>], options: &CheckOptions) -> Result<Self> {
+    pub(super) fn new(
+        points: &[Point3<f64>],
+        voxels: Voxels<'_>,
+        options: &CheckOptions,
+    ) -> Result<Self> {
         let (indexed, image) = crate::join(
             || -> Result<_> {
-                let voxels = voxel_centroids(points, options.voxel_size)?;
+                let surface = match voxels {
+                    Voxels::Raw => Arc::new(SurfaceCloud::new(voxel_centroids(
+                        points,
+                        options.voxel_size,
+                    )?)?),
+                    Voxels::Centroids(v) => Arc::new(SurfaceCloud::new(v.to_vec())?),
+                    Voxels::Surface(s) => s,
+                };
+                let voxels = surface.points();
                 let stride = voxels.len().div_ceil(options.samples).max(1);
                 let samples = voxels.iter().step_by(stride).copied().collect();
-                Ok((SurfaceCloud::new(voxels)?, samples))
+                Ok((surface, samples))
             },
             || RangeImage::new(points, options.visibility_resolution),
         );

@@ -154,7 +154,7 @@ use self::rivals::{
 };
 use self::segment::{check_cloud, prepare, Prepared};
 use self::verify::{settle_best, stride_sample, verify_hypotheses, Verified, Verifier};
-use crate::check::{LazyCheck, MAX_HELD_CORRECTION};
+use crate::check::{LazyCheck, Voxels, MAX_HELD_CORRECTION};
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector3};
 
@@ -250,7 +250,18 @@ pub fn calibrate_targetless(
 
     // Step 4: verification, the best pose and its rivals.
     let pool = verify_hypotheses(&verifier, &chosen);
+    // The check downsamples the clouds as step 1 did when its voxels are the same size: it
+    // starts from the indexed reference and the target's voxels (the same points, so the same
+    // check).
     let checks = LazyCheck::new(reference, target, &options.check);
+    let checks = if options.check.voxel_size == options.voxel_size {
+        checks.with_voxels([
+            Voxels::Surface(verifier.surface()),
+            Voxels::Centroids(&target_ds.points),
+        ])
+    } else {
+        checks
+    };
     let choice = choose(&verifier, &pool, &checks, &reference_ds, &field, options)?;
     let top = choice.top;
     // Refused after the observability check below, whose reason is the more fundamental one

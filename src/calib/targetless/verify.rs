@@ -1,6 +1,8 @@
 //! Step 4: verification of the hypotheses (screening ICP and score, then a longer ICP and the full
 //! score) and the choice of the best pose and its closest distinct rival.
 
+use std::sync::Arc;
+
 use nalgebra::{Isometry3, Point3};
 
 use super::hypotheses::{same_pose, Candidate};
@@ -174,7 +176,7 @@ pub(super) type Samples = [Vec<Point3<f64>>; 2];
 /// surface for the agreement and ICP, both clouds' range images for the free space, and the
 /// points sampled for the screening (`quick`) and for the full verification (`full`).
 pub(super) struct Verifier<'a> {
-    surface: SurfaceCloud,
+    surface: Arc<SurfaceCloud>,
     target: &'a [Point3<f64>],
     reference_image: RangeImage,
     target_image: RangeImage,
@@ -193,7 +195,7 @@ impl<'a> Verifier<'a> {
     ) -> Result<Self> {
         // Three independent builds, side by side (the errors in this order).
         let (surface, (reference_image, target_image)) = crate::join(
-            || SurfaceCloud::new(reference.to_vec()),
+            || SurfaceCloud::new(reference.to_vec()).map(Arc::new),
             || {
                 crate::join(
                     || RangeImage::new(reference, RangeImage::DEFAULT_RESOLUTION),
@@ -217,6 +219,11 @@ impl<'a> Verifier<'a> {
             ],
             final_icp,
         })
+    }
+
+    /// The indexed reference (its voxels), shared with the check.
+    pub(super) fn surface(&self) -> Arc<SurfaceCloud> {
+        Arc::clone(&self.surface)
     }
 
     /// The reference's range image (points in the reference sensor's frame).
