@@ -6,8 +6,12 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Point3};
 
 use super::hypotheses::{same_pose, Candidate};
+use super::segment::PlaneFeature;
 use crate::error::Result;
-use crate::icp::{point_to_plane_fit, point_to_plane_icp, IcpOptions, IcpResult, SurfaceCloud};
+use crate::icp::{
+    point_to_plane_fit_on_planes, point_to_plane_icp, point_to_plane_icp_on_planes, IcpOptions,
+    IcpResult, PlaneNormals, SurfaceCloud,
+};
 use crate::visibility::RangeImage;
 
 /// Two verified hypotheses further apart than this rotation (radians, 2 degrees) ...
@@ -177,6 +181,8 @@ pub(super) type Samples = [Vec<Point3<f64>>; 2];
 /// points sampled for the screening (`quick`) and for the full verification (`full`).
 pub(super) struct Verifier<'a> {
     surface: Arc<SurfaceCloud>,
+    /// The reference's planes, for the normals of its scan-line points in the final ICP.
+    planes: PlaneNormals,
     target: &'a [Point3<f64>],
     reference_image: RangeImage,
     target_image: RangeImage,
@@ -186,10 +192,11 @@ pub(super) struct Verifier<'a> {
 }
 
 impl<'a> Verifier<'a> {
-    /// Indexes `reference` and images both clouds; `final_icp` is the ICP of
-    /// [`polish`](Self::polish) and of the final refinement.
+    /// Indexes `reference` (with its `planes`, indices into it) and images both clouds;
+    /// `final_icp` is the ICP of [`polish`](Self::polish) and of the final refinement.
     pub(super) fn new(
         reference: &[Point3<f64>],
+        planes: &[PlaneFeature],
         target: &'a [Point3<f64>],
         final_icp: IcpOptions,
     ) -> Result<Self> {
@@ -204,8 +211,15 @@ impl<'a> Verifier<'a> {
             },
         );
         let (surface, reference_image, target_image) = (surface?, reference_image?, target_image?);
+        let planes = PlaneNormals::new(
+            &surface,
+            planes
+                .iter()
+                .map(|f| (f.plane.normal.into_inner(), f.voxels.as_slice())),
+        );
         Ok(Verifier {
             surface,
+            planes,
             target,
             reference_image,
             target_image,
@@ -301,14 +315,25 @@ impl<'a> Verifier<'a> {
         self.icp_then_score(&v.pose, &self.final_icp, &self.full)
     }
 
-    /// The final point-to-plane ICP from `start`.
+    /// The final point-to-plane ICP from `start`. The reference's scan-line points take their
+    /// plane's normal ([`PlaneNormals`]): the final pose is fitted to the surfaces, not to the
+    /// rings of a sparse unit. The verification keeps the points' own normals: the rules that
+    /// rank and refuse its poses were set on those scores.
     pub(super) fn final_icp(&self, start: &Isometry3<f64>) -> Result<IcpResult> {
+        let (planes, options) = (Some(&self.planes), &self.final_icp);
+        point_to_plane_icp_on_planes(&self.surface, planes, self.target, start, options)
+    }
+
+    /// The final point-to-plane ICP from `start` on the points' own normals, as the check's
+    /// re-alignment sees the reference.
+    pub(super) fn final_icp_own_normals(&self, start: &Isometry3<f64>) -> Result<IcpResult> {
         point_to_plane_icp(&self.surface, self.target, start, &self.final_icp)
     }
 
     /// The final ICP's correspondences and information at `pose`, without moving it.
     pub(super) fn fit_at(&self, pose: &Isometry3<f64>) -> Result<IcpResult> {
-        point_to_plane_fit(&self.surface, self.target, pose, &self.final_icp)
+        let (planes, options) = (Some(&self.planes), &self.final_icp);
+        point_to_plane_fit_on_planes(&self.surface, planes, self.target, pose, options)
     }
 }
 
