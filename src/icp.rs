@@ -1057,7 +1057,8 @@ mod tests {
         // A wall at x = 5 seen as three rings 0.5 m apart, 5 cm between points along each, with
         // range noise (x, 5 mm) above the beam's wobble (z, 2 mm): each point's ten neighbours
         // lie along its ring, and their smallest axis is the vertical, not the wall's normal.
-        // The ground's points, a surface of their own, keep theirs.
+        // The ground's points, inliers of a plane too but spread over it (no line), keep theirs
+        // even when that plane's normal is off.
         let wobble = |k: usize, a: f64| a * ((k * 7919) % 13) as f64 / 6.0 - a;
         let mut points = Vec::new();
         for ring in 0..3 {
@@ -1073,17 +1074,21 @@ mod tests {
                 points.push(Point3::new(i as f64 * 0.2, j as f64 * 0.2 - 2.0, -1.5));
             }
         }
+        let ground: Vec<usize> = (wall.len()..points.len()).collect();
+        let tilted = Vector3::new(0.2, 0.0, 1.0).normalize();
         let cloud = SurfaceCloud::new(points).unwrap();
-        let planes = PlaneNormals::new(&cloud, [(Vector3::x(), wall.as_slice())]);
+        let planes = PlaneNormals::new(
+            &cloud,
+            [(Vector3::x(), wall.as_slice()), (tilted, ground.as_slice())],
+        );
         let on_ring = 80 + 40;
         let own = cloud.normal(on_ring).unwrap();
         assert!(own.z.abs() > 0.9, "own normal {own:?}");
         let taken = cloud.normal_on_planes(on_ring, &planes).unwrap();
         assert_eq!(taken, Vector3::x());
-        let ground = wall.len() + 210;
-        assert_eq!(
-            cloud.normal_on_planes(ground, &planes),
-            cloud.normal(ground)
-        );
+        let on_ground = wall.len() + 210;
+        let kept = cloud.normal_on_planes(on_ground, &planes).unwrap();
+        assert_eq!(Some(kept), cloud.normal(on_ground));
+        assert!(kept.z.abs() > 0.999, "ground normal {kept:?}");
     }
 }
