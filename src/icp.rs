@@ -351,11 +351,14 @@ impl SurfaceCloud {
         };
         *cell.get_or_init(|| {
             let (values, vectors) = self.neighbourhood(self.points.get(i)?).principal_axes();
+            // One neighbourhood search for both: the own normal is cached as `normal(i)` would.
+            let own = self.normals.get(i)?;
+            let own = *own.get_or_init(|| Self::surface_normal(&values, &vectors));
             let along_line = values[1] < LINE_SPREAD * values[2];
             if along_line && vectors[2].dot(plane).abs() < LINE_IN_PLANE.sin() {
                 Some(*plane)
             } else {
-                self.normal(i)
+                own
             }
         })
     }
@@ -608,11 +611,8 @@ struct Surface<'a> {
 }
 
 impl<'a> Surface<'a> {
-    fn own(cloud: &'a SurfaceCloud) -> Self {
-        Surface {
-            cloud,
-            planes: None,
-        }
+    fn new(cloud: &'a SurfaceCloud, planes: Option<&'a PlaneNormals>) -> Self {
+        Surface { cloud, planes }
     }
 
     fn normal(&self, i: usize) -> Option<Vector3<f64>> {
@@ -676,10 +676,7 @@ pub(crate) fn point_to_plane_icp_on_planes(
     options: &IcpOptions,
 ) -> Result<IcpResult> {
     let samples = stride_samples(target, options)?;
-    let surface = Surface {
-        cloud: reference,
-        planes,
-    };
+    let surface = Surface::new(reference, planes);
     icp_on_samples(surface, &samples, initial, options, 0.0)
 }
 
@@ -716,12 +713,8 @@ pub(crate) fn point_to_plane_fit_on_planes(
     options: &IcpOptions,
 ) -> Result<IcpResult> {
     let samples = stride_samples(target, options)?;
-    let surface = Surface {
-        cloud: reference,
-        planes,
-    };
     Ok(summarise(
-        surface,
+        Surface::new(reference, planes),
         &samples,
         pose,
         options.min_distance,
@@ -770,7 +763,7 @@ pub fn point_to_plane_icp_with_normals(
     .flatten()
     .collect();
     icp_on_samples(
-        Surface::own(reference),
+        Surface::new(reference, None),
         &samples,
         initial,
         options,

@@ -8,7 +8,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rustc_hash::FxHashMap;
 
-use super::rivals::TWIN_AGREEMENT_MARGIN;
+use super::rivals::{mean_agreement_gain, TWIN_AGREEMENT_MARGIN};
 use super::segment::PlaneFeature;
 use super::symmetry::largest_of_directions;
 use super::verify::stride_sample;
@@ -243,10 +243,8 @@ pub(super) fn period_twin(
             // The two ways' agreement within TWIN_AGREEMENT_MARGIN on average (a shift along a
             // row trades one end of it for the other, so one way may gain what the other
             // loses), and the free space as clear within half a point.
-            let gain =
-                (c.agreement - report.agreement) + (c.reverse_agreement - report.reverse_agreement);
             let twin = c.verdict == Verdict::Consistent
-                && gain >= -2.0 * TWIN_AGREEMENT_MARGIN
+                && mean_agreement_gain(report, &c) >= -TWIN_AGREEMENT_MARGIN
                 && c.free_share() <= report.free_share() + PERIOD_FREE_MARGIN;
             if twin {
                 return Ok(Some((shift, c)));

@@ -759,7 +759,7 @@ fn fits_clearly_better(report: &CheckReport, c: &CheckReport, tie_margin: f64) -
 
 /// The mean of the two ways' agreement gains of the check `c` of another pose over the result's
 /// (`report`).
-fn mean_agreement_gain(report: &CheckReport, c: &CheckReport) -> f64 {
+pub(super) fn mean_agreement_gain(report: &CheckReport, c: &CheckReport) -> f64 {
     0.5 * ((c.agreement - report.agreement) + (c.reverse_agreement - report.reverse_agreement))
 }
 
